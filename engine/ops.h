@@ -1,0 +1,95 @@
+// The engine's differentiable ops. Every function records itself on the autograd tape when an
+// input requires grad (and grad mode is on), allocates its output and runs the kernel of the
+// dispatch table for the inputs' device and dtype. All inputs of one op must share device and
+// dtype. Shapes are NCHW where images are concerned.
+#pragma once
+#include <vector>
+
+#include "engine/tensor.h"
+#include "kernels/kernel_params.h"
+
+namespace cvd {
+
+// ---- Element-wise, unary -------------------------------------------------------------------
+Tensor relu(const Tensor& x);
+Tensor relu6(const Tensor& x);
+Tensor clamp(const Tensor& x, double lo, double hi);
+Tensor leaky_relu(const Tensor& x, double negative_slope = 0.01);
+Tensor sigmoid(const Tensor& x);
+Tensor tanh(const Tensor& x);
+Tensor exp(const Tensor& x);
+Tensor log(const Tensor& x);
+Tensor abs(const Tensor& x);
+Tensor sqrt(const Tensor& x);
+Tensor neg(const Tensor& x);
+Tensor reciprocal(const Tensor& x);
+Tensor pow(const Tensor& x, double exponent);
+Tensor square(const Tensor& x);
+Tensor add_scalar(const Tensor& x, double s);
+Tensor mul_scalar(const Tensor& x, double s);
+Tensor unary(const Tensor& x, const UnaryParams& p);
+
+// ---- Element-wise, binary with NumPy broadcasting -------------------------------------------
+Tensor add(const Tensor& a, const Tensor& b);
+Tensor sub(const Tensor& a, const Tensor& b);
+Tensor mul(const Tensor& a, const Tensor& b);
+Tensor div(const Tensor& a, const Tensor& b);
+Tensor minimum(const Tensor& a, const Tensor& b);  // gradient goes to a where a <= b
+Tensor maximum(const Tensor& a, const Tensor& b);  // gradient goes to a where a >= b
+// Comparisons: 1 where true, 0 elsewhere; never require grad.
+Tensor gt(const Tensor& a, const Tensor& b);
+Tensor ge(const Tensor& a, const Tensor& b);
+Tensor lt(const Tensor& a, const Tensor& b);
+Tensor le(const Tensor& a, const Tensor& b);
+Tensor eq(const Tensor& a, const Tensor& b);
+// cond != 0 ? a : b, broadcasting all three; differentiable in a and b.
+Tensor where(const Tensor& cond, const Tensor& a, const Tensor& b);
+Shape broadcast_shapes(const Shape& a, const Shape& b);
+
+// ---- Reductions -----------------------------------------------------------------------------
+// Empty dims = all dims. Negative dims count from the end.
+Tensor sum(const Tensor& x, std::vector<int> dims = {}, bool keepdim = false);
+Tensor mean(const Tensor& x, std::vector<int> dims = {}, bool keepdim = false);
+// Sums a broadcast gradient back to `shape` (the inverse of broadcasting).
+Tensor sum_to(const Tensor& x, const Shape& shape);
+
+// ---- Shape and layout -----------------------------------------------------------------------
+Tensor reshape(const Tensor& x, const Shape& shape);  // one dim may be -1
+Tensor permute(const Tensor& x, const std::vector<int>& dims);
+Tensor transpose(const Tensor& x, int a, int b);
+Tensor squeeze(const Tensor& x, int dim);
+Tensor unsqueeze(const Tensor& x, int dim);
+Tensor narrow(const Tensor& x, int dim, int64_t start, int64_t length);
+Tensor expand(const Tensor& x, const Shape& shape);
+Tensor contiguous(const Tensor& x);
+Tensor concat(const std::vector<Tensor>& xs, int dim);
+// PyTorch F.pad order: pads = {last_before, last_after, second_last_before, ...}; constant value.
+// Negative amounts crop.
+Tensor pad(const Tensor& x, const std::vector<int64_t>& pads, double value = 0.0);
+
+// ---- Neural-network ops ---------------------------------------------------------------------
+// x [N, C, H, W]; w [O, C/groups, kh, kw]; b [O] or undefined.
+Tensor conv2d(const Tensor& x, const Tensor& w, const Tensor& b, const Conv2dParams& p);
+// w [C, O/groups, kh, kw].
+Tensor conv_transpose2d(const Tensor& x, const Tensor& w, const Tensor& b,
+                        const ConvTranspose2dParams& p);
+// gamma / beta may be undefined (affine=false). running stats are updated in place when
+// training (they never require grad).
+Tensor batch_norm(const Tensor& x, const Tensor& running_mean, const Tensor& running_var,
+                  const Tensor& gamma, const Tensor& beta, const BatchNormParams& p);
+Tensor max_pool2d(const Tensor& x, const Pool2dParams& p);
+Tensor avg_pool2d(const Tensor& x, const Pool2dParams& p);
+Tensor upsample_bilinear2d(const Tensor& x, int64_t out_h, int64_t out_w, bool align_corners);
+Tensor upsample_nearest2d(const Tensor& x, int64_t out_h, int64_t out_w);
+// a [..., M, K] x b [..., K, N]; 2-D, or 3-D with equal batch, or b 2-D shared across a's batch.
+Tensor matmul(const Tensor& a, const Tensor& b);
+// x [..., in]; w [out, in]; b [out] or undefined.
+Tensor linear(const Tensor& x, const Tensor& w, const Tensor& b);
+// x [N, C, H, W]; grid [N, Ho, Wo, 2] -> [N, C, Ho, Wo].
+Tensor grid_sample(const Tensor& x, const Tensor& grid, const GridSampleParams& p);
+
+// Output spatial size of a convolution / pooling along one dim (floor or ceil mode).
+int64_t conv_out_size(int64_t in, int k, int stride, int pad_before, int pad_after, int dilation);
+int64_t pool_out_size(int64_t in, int k, int stride, int pad_before, int pad_after, bool ceil_mode);
+
+}  // namespace cvd

@@ -1,0 +1,60 @@
+#include "engine/storage.h"
+
+#include <cstdlib>
+#include <cstring>
+#include <new>
+
+#include "engine/error.h"
+
+namespace cvd {
+
+namespace {
+
+class CpuAllocator final : public Allocator {
+ public:
+  void* allocate(size_t nbytes) override {
+    if (nbytes == 0) return nullptr;
+    size_t rounded = (nbytes + 63) / 64 * 64;
+    void* p = std::aligned_alloc(64, rounded);
+    if (!p) fail(ErrorCategory::internal, "out of host memory allocating {} bytes", nbytes);
+    return p;
+  }
+  void deallocate(void* p, size_t) override { std::free(p); }
+  Device device() const override { return Device::cpu(); }
+};
+
+Allocator* g_device_allocators[kNumDeviceTypes] = {nullptr, nullptr};
+std::atomic<uint64_t> g_next_storage_id{1};
+
+}  // namespace
+
+Allocator* cpu_allocator() {
+  static CpuAllocator a;
+  return &a;
+}
+
+Allocator* device_allocator(Device d) {
+  if (d.is_cpu()) return cpu_allocator();
+  return g_device_allocators[static_cast<int>(d.type)];
+}
+
+void set_device_allocator(DeviceType t, Allocator* a) { g_device_allocators[static_cast<int>(t)] = a; }
+
+Storage::Storage(size_t nbytes, Allocator* alloc)
+    : nbytes_(nbytes), device_(alloc->device()), alloc_(alloc), id_(g_next_storage_id++) {
+  data_ = alloc->allocate(nbytes);
+}
+
+Storage::Storage(void* data, size_t nbytes, Device device, std::function<void()> release)
+    : data_(data), nbytes_(nbytes), device_(device), release_(std::move(release)),
+      id_(g_next_storage_id++) {}
+
+Storage::~Storage() {
+  if (release_) {
+    release_();
+  } else if (alloc_ && data_) {
+    alloc_->deallocate(data_, nbytes_);
+  }
+}
+
+}  // namespace cvd

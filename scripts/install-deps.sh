@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# Installs every Debian package cvd needs to build, test and run (DESIGN.md section 9).
+# Idempotent; run as root on Debian 12. Set CVD_WITH_PYTHON=1 to also install the offline
+# reference tools' packages (python3-torch etc.), which the build and tests never need.
+set -euo pipefail
+if [ "$(id -u)" -ne 0 ]; then
+  echo "install-deps.sh: must run as root (apt-get install)" >&2
+  exit 1
+fi
+pkgs=(
+  build-essential cmake ninja-build pkg-config ccache git
+  libeigen3-dev libopencv-dev libopencv-contrib-dev libceres-dev colmap
+  libdnnl-dev ocl-icd-opencl-dev libgtest-dev libgmock-dev libbenchmark-dev
+  ffmpeg libcli11-dev nlohmann-json3-dev libspdlog-dev libfmt-dev
+  libonnx-dev libprotobuf-dev protobuf-compiler zlib1g-dev doxygen clang
+)
+if [ "${CVD_WITH_PYTHON:-0}" = "1" ]; then
+  pkgs+=(python3-torch python3-torchvision python3-onnx python3-numpy)
+fi
+missing=()
+for p in "${pkgs[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ "${#missing[@]}" -eq 0 ]; then
+  echo "install-deps.sh: all ${#pkgs[@]} packages already installed"
+  exit 0
+fi
+echo "install-deps.sh: installing ${missing[*]}"
+export DEBIAN_FRONTEND=noninteractive
+apt-get update -qq
+apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+echo "install-deps.sh: done"

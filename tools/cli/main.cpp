@@ -1,0 +1,67 @@
+// The `cvd` command line: every subcommand lives in tools/cli/cmd_<name>.cpp.
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cstdio>
+
+#include "engine/error.h"
+#include "tools/cli/command.h"
+
+namespace cvd::cli {
+
+GlobalOptions& global_options() {
+  static GlobalOptions o;
+  return o;
+}
+
+std::vector<RegisteredCommand>& registered_commands() {
+  static std::vector<RegisteredCommand> v;
+  return v;
+}
+
+CommandRegistration::CommandRegistration(int order, std::function<void(CLI::App&)> setup) {
+  registered_commands().push_back({order, std::move(setup)});
+}
+
+static int exit_code_for(ErrorCategory c) {
+  switch (c) {
+    case ErrorCategory::invalid_argument:
+    case ErrorCategory::format: return kExitBadInput;
+    case ErrorCategory::io: return kExitIo;
+    case ErrorCategory::external: return kExitExternal;
+    case ErrorCategory::numerical: return kExitNumerical;
+    case ErrorCategory::unsupported:
+    case ErrorCategory::device: return kExitUnsupported;
+    case ErrorCategory::cancelled: return kExitCancelled;
+    case ErrorCategory::internal: return kExitFailure;
+  }
+  return kExitFailure;
+}
+
+}  // namespace cvd::cli
+
+int main(int argc, char** argv) {
+  using namespace cvd::cli;
+  CLI::App app{"cvd: consistent video depth (Luo et al. 2020) in native C++"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", std::string("cvd ") + CVD_VERSION);
+  auto& g = global_options();
+  app.add_flag("-q,--quiet", g.quiet, "Only print errors and the final summary");
+  app.add_flag("-v,--verbose", g.verbose, "Print debug detail");
+  auto cmds = registered_commands();
+  std::sort(cmds.begin(), cmds.end(), [](auto& a, auto& b) { return a.order < b.order; });
+  for (auto& c : cmds) c.setup(app);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    int rc = app.exit(e);
+    return rc == 0 ? 0 : kExitUsage;
+  } catch (const cvd::Error& e) {
+    std::fprintf(stderr, "cvd: error: %s\n", e.what());
+    return exit_code_for(e.category());
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "cvd: internal error: %s\n", e.what());
+    return kExitFailure;
+  }
+  return 0;
+}

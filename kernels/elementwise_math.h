@@ -92,4 +92,82 @@ CVD_HOST_DEVICE T grid_unnormalize_scale(long size, bool align_corners) {
   return align_corners ? T(size - 1) / T(2) : T(size) / T(2);
 }
 
+// ---- Resampling taps (PyTorch semantics), shared by the resize and grid_sample kernels ---------
+
+// PyTorch "nearest" source index: floor(o * scale) with scale = in / out rounded to float, as
+// PyTorch computes it (so in 2, out 82, o 41 gives 0 where exact arithmetic gives 1); o itself
+// when out == in, o / 2 when out == 2 * in; clamped to in - 1.
+CVD_HOST_DEVICE long nearest_source_index(long o, long in, long out) {
+  if (out == in) return o;
+  if (out == 2 * in) return o >> 1;
+  const float scale = static_cast<float>(in) / static_cast<float>(out);
+  const long i = static_cast<long>(floorf(static_cast<float>(o) * scale));
+  return i < in - 1 ? i : in - 1;
+}
+
+// The two source taps of output index o along one axis of a bilinear resize (PyTorch
+// upsample_bilinear2d): i0 = floor(src) clamped to in - 1, i1 = i0 + 1 clamped to in - 1, and
+// their weights w0 = 1 - w1, w1 = src - i0 clamped to [0, 1].
+template <class T>
+struct LinearResizeTaps {
+  long i0, i1;
+  T w0, w1;
+};
+template <class T>
+CVD_HOST_DEVICE LinearResizeTaps<T> resize_linear_taps(long o, long in, long out,
+                                                       bool align_corners) {
+  const T src = resize_source_coord<T>(o, in, out, align_corners);
+  long i0 = static_cast<long>(floor(src));  // src >= 0
+  if (i0 > in - 1) i0 = in - 1;
+  const long i1 = i0 < in - 1 ? i0 + 1 : i0;
+  T w1 = src - T(i0);
+  w1 = w1 < T(0) ? T(0) : (w1 > T(1) ? T(1) : w1);
+  return {i0, i1, T(1) - w1, w1};
+}
+
+// grid_sample source pixel coordinate of the normalised value g along an axis of `size` pixels
+// (PyTorch grid_sampler_compute_source_index), and d(coordinate)/dg in *dcoord. Border padding
+// clips to [0, size - 1]; as in PyTorch (clip_coordinates_set_grad) the gradient is 0 at and
+// beyond the clip limits (coordinate <= 0 or >= size - 1).
+template <class T>
+CVD_HOST_DEVICE T grid_source_coord(T g, long size, GridPadding padding, bool align_corners,
+                                    T* dcoord) {
+  T c = grid_unnormalize<T>(g, size, align_corners);
+  T d = grid_unnormalize_scale<T>(size, align_corners);
+  if (padding == GridPadding::border) {
+    if (c <= T(0)) {
+      c = T(0), d = T(0);
+    } else if (c >= T(size - 1)) {
+      c = T(size - 1), d = T(0);
+    }
+  }
+  *dcoord = d;
+  return c;
+}
+
+// ---- Optimiser steps, one element (PyTorch torch.optim semantics, see kernel_params.h) ---------
+
+// Adam. step_size = lr / (1 - beta1^t), bc2_sqrt = sqrt(1 - beta2^t), computed once per step.
+template <class T>
+CVD_HOST_DEVICE void adam_update_element(T& p, T g, T& m, T& v, T beta1, T beta2, T eps,
+                                         T weight_decay, T step_size, T bc2_sqrt) {
+  if (weight_decay != T(0)) g = g + weight_decay * p;
+  m = m * beta1 + (T(1) - beta1) * g;
+  v = v * beta2 + (T(1) - beta2) * g * g;
+  const T denom = sqrt(v) / bc2_sqrt + eps;
+  p = p - step_size * (m / denom);
+}
+
+// SGD with momentum (buf unused when momentum == 0).
+template <class T>
+CVD_HOST_DEVICE void sgd_update_element(T& p, T g, T& buf, T lr, T momentum, T dampening,
+                                        T weight_decay, bool nesterov, bool first_step) {
+  if (weight_decay != T(0)) g = g + weight_decay * p;
+  if (momentum != T(0)) {
+    buf = first_step ? g : buf * momentum + (T(1) - dampening) * g;
+    g = nesterov ? g + momentum * buf : buf;
+  }
+  p = p - lr * g;
+}
+
 }  // namespace cvd

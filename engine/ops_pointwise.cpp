@@ -1,0 +1,165 @@
+// Element-wise ops: unary (with scalar parameters), broadcasting binaries, comparisons, where.
+#include "engine/op_support.h"
+
+namespace cvd {
+
+using detail::check_same_kind;
+using detail::empty_like_kind;
+
+static const char* unary_name(UnaryOp op) {
+  switch (op) {
+    case UnaryOp::relu: return "relu";
+    case UnaryOp::clip: return "clip";
+    case UnaryOp::leaky_relu: return "leaky_relu";
+    case UnaryOp::sigmoid: return "sigmoid";
+    case UnaryOp::tanh: return "tanh";
+    case UnaryOp::exp: return "exp";
+    case UnaryOp::log: return "log";
+    case UnaryOp::abs: return "abs";
+    case UnaryOp::sqrt: return "sqrt";
+    case UnaryOp::neg: return "neg";
+    case UnaryOp::reciprocal: return "reciprocal";
+    case UnaryOp::pow_scalar: return "pow";
+    case UnaryOp::mul_scalar: return "mul_scalar";
+    case UnaryOp::add_scalar: return "add_scalar";
+  }
+  return "unary";
+}
+
+Tensor unary(const Tensor& x_in, const UnaryParams& p) {
+  Tensor x = x_in.contiguous();
+  Tensor y = empty_like_kind(x.shape(), x);
+  dispatch(OpId::unary, x, KernelArgs{{x}, {y}, &p});
+  if (!any_requires_grad({x})) return y;
+  return record(unary_name(p.op), y, {x},
+                [xs = x.detach(), ys = y.detach(), p](const Tensor& g, const std::vector<bool>&) {
+                  Tensor gc = g.contiguous();
+                  Tensor gx = empty_like_kind(xs.shape(), xs);
+                  dispatch(OpId::unary_backward, gc, KernelArgs{{gc, xs, ys}, {gx}, &p});
+                  return std::vector<Tensor>{gx};
+                });
+}
+
+Tensor relu(const Tensor& x) { return unary(x, {UnaryOp::relu}); }
+Tensor relu6(const Tensor& x) { return unary(x, {UnaryOp::clip, 0.0, 6.0}); }
+Tensor clamp(const Tensor& x, double lo, double hi) { return unary(x, {UnaryOp::clip, lo, hi}); }
+Tensor leaky_relu(const Tensor& x, double s) { return unary(x, {UnaryOp::leaky_relu, s}); }
+Tensor sigmoid(const Tensor& x) { return unary(x, {UnaryOp::sigmoid}); }
+Tensor tanh(const Tensor& x) { return unary(x, {UnaryOp::tanh}); }
+Tensor exp(const Tensor& x) { return unary(x, {UnaryOp::exp}); }
+Tensor log(const Tensor& x) { return unary(x, {UnaryOp::log}); }
+Tensor abs(const Tensor& x) { return unary(x, {UnaryOp::abs}); }
+Tensor sqrt(const Tensor& x) { return unary(x, {UnaryOp::sqrt}); }
+Tensor neg(const Tensor& x) { return unary(x, {UnaryOp::neg}); }
+Tensor reciprocal(const Tensor& x) { return unary(x, {UnaryOp::reciprocal}); }
+Tensor pow(const Tensor& x, double e) { return unary(x, {UnaryOp::pow_scalar, e}); }
+Tensor square(const Tensor& x) { return unary(x, {UnaryOp::pow_scalar, 2.0}); }
+Tensor add_scalar(const Tensor& x, double s) { return unary(x, {UnaryOp::add_scalar, s}); }
+Tensor mul_scalar(const Tensor& x, double s) { return unary(x, {UnaryOp::mul_scalar, s}); }
+
+Shape broadcast_shapes(const Shape& a, const Shape& b) {
+  size_t n = std::max(a.size(), b.size());
+  Shape r(n);
+  for (size_t i = 0; i < n; ++i) {
+    int64_t da = i < n - a.size() ? 1 : a[i - (n - a.size())];
+    int64_t db = i < n - b.size() ? 1 : b[i - (n - b.size())];
+    CVD_CHECK(da == db || da == 1 || db == 1, "shapes {} and {} do not broadcast", shape_str(a),
+              shape_str(b));
+    r[i] = da == 1 ? db : da;
+  }
+  return r;
+}
+
+static Tensor binary_raw(const Tensor& a, const Tensor& b, BinaryOp op, const Shape& out_shape) {
+  Tensor av = a.detach().expand(out_shape);
+  Tensor bv = b.detach().expand(out_shape);
+  Tensor c = empty_like_kind(out_shape, a);
+  BinaryParams p{op};
+  dispatch(OpId::binary, a, KernelArgs{{av, bv}, {c}, &p});
+  return c;
+}
+
+static Tensor binary(const Tensor& a, const Tensor& b, BinaryOp op, const char* name) {
+  check_same_kind(name, a, b);
+  Shape out = broadcast_shapes(a.shape(), b.shape());
+  Tensor c = binary_raw(a, b, op, out);
+  if (!any_requires_grad({a, b})) return c;
+  return record(name, c, {a, b},
+                [as = a.detach(), bs = b.detach(), op](const Tensor& g,
+                                                       const std::vector<bool>& need) {
+                  Tensor ga, gb;
+                  switch (op) {
+                    case BinaryOp::add:
+                      ga = g;
+                      gb = g;
+                      break;
+                    case BinaryOp::sub:
+                      ga = g;
+                      if (need[1]) gb = neg(g);
+                      break;
+                    case BinaryOp::mul:
+                      if (need[0]) ga = mul(g, bs);
+                      if (need[1]) gb = mul(g, as);
+                      break;
+                    case BinaryOp::div:
+                      if (need[0]) ga = div(g, bs);
+                      if (need[1]) gb = neg(div(mul(g, as), mul(bs, bs)));
+                      break;
+                    case BinaryOp::minimum:
+                    case BinaryOp::maximum: {
+                      // The gradient goes to a where a wins (ties: a), else to b.
+                      Tensor a_wins = op == BinaryOp::minimum ? le(as, bs) : ge(as, bs);
+                      Tensor zero = Tensor::zeros({}, g.dtype(), g.device());
+                      if (need[0]) ga = where(a_wins, g, zero);
+                      if (need[1]) gb = where(a_wins, zero, g);
+                      break;
+                    }
+                    default: break;
+                  }
+                  if (ga.defined() && need[0]) ga = sum_to(ga, as.shape()); else ga = Tensor();
+                  if (gb.defined() && need[1]) gb = sum_to(gb, bs.shape()); else gb = Tensor();
+                  return std::vector<Tensor>{ga, gb};
+                });
+}
+
+Tensor add(const Tensor& a, const Tensor& b) { return binary(a, b, BinaryOp::add, "add"); }
+Tensor sub(const Tensor& a, const Tensor& b) { return binary(a, b, BinaryOp::sub, "sub"); }
+Tensor mul(const Tensor& a, const Tensor& b) { return binary(a, b, BinaryOp::mul, "mul"); }
+Tensor div(const Tensor& a, const Tensor& b) { return binary(a, b, BinaryOp::div, "div"); }
+Tensor minimum(const Tensor& a, const Tensor& b) {
+  return binary(a, b, BinaryOp::minimum, "minimum");
+}
+Tensor maximum(const Tensor& a, const Tensor& b) {
+  return binary(a, b, BinaryOp::maximum, "maximum");
+}
+
+static Tensor compare(const Tensor& a, const Tensor& b, BinaryOp op, const char* name) {
+  check_same_kind(name, a, b);
+  return binary_raw(a, b, op, broadcast_shapes(a.shape(), b.shape()));
+}
+Tensor gt(const Tensor& a, const Tensor& b) { return compare(a, b, BinaryOp::gt, "gt"); }
+Tensor ge(const Tensor& a, const Tensor& b) { return compare(a, b, BinaryOp::ge, "ge"); }
+Tensor lt(const Tensor& a, const Tensor& b) { return compare(a, b, BinaryOp::lt, "lt"); }
+Tensor le(const Tensor& a, const Tensor& b) { return compare(a, b, BinaryOp::le, "le"); }
+Tensor eq(const Tensor& a, const Tensor& b) { return compare(a, b, BinaryOp::eq, "eq"); }
+
+Tensor where(const Tensor& cond, const Tensor& a, const Tensor& b) {
+  check_same_kind("where", a, b);
+  check_same_kind("where", a, cond);
+  Shape out = broadcast_shapes(broadcast_shapes(cond.shape(), a.shape()), b.shape());
+  Tensor c = empty_like_kind(out, a);
+  Tensor cv = cond.detach().expand(out), av = a.detach().expand(out), bv = b.detach().expand(out);
+  dispatch(OpId::where, a, KernelArgs{{cv, av, bv}, {c}, nullptr});
+  if (!any_requires_grad({a, b})) return c;
+  return record("where", c, {a, b},
+                [cs = cond.detach(), ashape = a.shape(), bshape = b.shape()](
+                    const Tensor& g, const std::vector<bool>& need) {
+                  Tensor zero = Tensor::zeros({}, g.dtype(), g.device());
+                  Tensor ga, gb;
+                  if (need[0]) ga = sum_to(where(cs, g, zero), ashape);
+                  if (need[1]) gb = sum_to(where(cs, zero, g), bshape);
+                  return std::vector<Tensor>{ga, gb};
+                });
+}
+
+}  // namespace cvd

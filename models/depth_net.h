@@ -1,0 +1,45 @@
+// The interface every single-image depth network implements (MiDaS v2, MiDaS v2.1 small,
+// Mannequin Challenge hourglass), so the pipeline, the CLI and the public API treat them alike.
+#pragma once
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "engine/module.h"
+#include "engine/random.h"
+
+namespace cvd {
+
+enum class DepthOutputKind {
+  inverse_depth,  // MiDaS: relative inverse depth >= 0; depth = 1 / max(output, eps)
+  log_depth,      // Mannequin: depth = exp(output)
+};
+
+class DepthNet : public Module {
+ public:
+  // Architecture name: "midas_v2", "midas_small" or "mannequin".
+  virtual std::string arch() const = 0;
+  // Input height and width must be multiples of this (MiDaS 32, Mannequin 16).
+  virtual int alignment() const = 0;
+  virtual DepthOutputKind output_kind() const = 0;
+  // Maps RGB in [0, 1], [N, 3, H, W], to the network's input (e.g. ImageNet normalisation).
+  virtual Tensor normalize_input(const Tensor& rgb01) const = 0;
+  // The raw network output for a normalised input: [N, 1, H, W].
+  virtual Tensor forward_raw(const Tensor& x) = 0;
+  // The final layer's bias (one element), used to set the initial depth level of an untrained
+  // network (e.g. log of the scene's median depth for Mannequin).
+  virtual Tensor output_bias() = 0;
+
+  // Positive depth from the raw output: [N, 1, H, W].
+  Tensor depth_from_raw(const Tensor& raw) const;
+  // Positive depth for RGB in [0, 1]: [N, 1, H, W]. Recorded for autograd in grad mode.
+  Tensor depth(const Tensor& rgb01) { return depth_from_raw(forward_raw(normalize_input(rgb01))); }
+  Tensor forward(const Tensor& rgb01) override { return depth(rgb01); }
+};
+
+// Creates an architecture with random weights drawn from `gen` (PyTorch default init).
+// `width` scales every channel count (1.0 = the published network); tests use tiny widths.
+std::unique_ptr<DepthNet> create_depth_net(const std::string& arch, double width, Generator& gen);
+std::vector<std::string> depth_net_archs();
+
+}  // namespace cvd

@@ -1,0 +1,200 @@
+// The op table (tests/op_case_table.cpp) run two ways, like ggml's test-backend-ops:
+//  - GradCheck: in float64, the autograd gradient of sum(op(x) * R) against central finite
+//    differences, for every differentiable input element;
+//  - F32VsReference: the fast f32 kernels (forward and backward) against the float64 reference
+//    kernels on the same inputs.
+// Plus coverage: every op of the dispatch table has a reference kernel and a fast CPU kernel.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "engine/autograd.h"
+#include "engine/dispatch.h"
+#include "engine/random.h"
+#include "tests/op_case_table.h"
+
+namespace cvd::test {
+namespace {
+
+Tensor make_input(const InputSpec& s, Generator& g) {
+  std::vector<double> v(shape_numel(s.shape));
+  for (auto& x : v) {
+    switch (s.init) {
+      case Init::normal: x = g.normal(); break;
+      case Init::positive: x = 0.5 + 1.5 * g.uniform(); break;
+      case Init::away_from_zero: x = (0.2 + g.uniform()) * (g.uniform() < 0.5 ? -1 : 1); break;
+      case Init::grid: x = -1.1 + 2.2 * g.uniform(); break;
+      case Init::mask: x = g.uniform() < 0.5 ? 0.0 : 1.0; break;
+    }
+  }
+  return Tensor::from_vector(v, s.shape, DType::f64);
+}
+
+struct Prepared {
+  std::vector<Tensor> inputs;  // f64 leaves
+  Tensor weights;              // R of the loss sum(out * R), f64
+};
+
+Prepared prepare(const OpCase& c, uint64_t seed) {
+  Generator g(seed);
+  Prepared p;
+  for (const auto& s : c.inputs) {
+    Tensor t = make_input(s, g);
+    if (s.differentiable) t.requires_grad_(true);
+    p.inputs.push_back(t);
+  }
+  Tensor out;
+  {
+    NoGradGuard ng;
+    out = c.fn(p.inputs);
+  }
+  p.weights = Tensor::randn(out.shape(), g, DType::f64);
+  return p;
+}
+
+Tensor weighted_loss(const OpCase& c, const std::vector<Tensor>& in, const Tensor& w) {
+  return sum(mul(c.fn(in), w));
+}
+
+double max_abs(const std::vector<double>& v) {
+  double m = 0;
+  for (double x : v) m = std::max(m, std::abs(x));
+  return m;
+}
+
+class OpTable : public ::testing::TestWithParam<OpCase> {};
+
+TEST_P(OpTable, GradCheck) {
+  const OpCase& c = GetParam();
+  Prepared p = prepare(c, 1234);
+  Tensor loss = weighted_loss(c, p.inputs, p.weights);
+  std::vector<Tensor> diff;
+  for (auto& t : p.inputs)
+    if (t.requires_grad()) diff.push_back(t);
+  std::vector<Tensor> analytic = grad(loss, diff);
+  const double eps = 1e-6;
+  NoGradGuard ng;
+  for (size_t i = 0; i < diff.size(); ++i) {
+    double* x = diff[i].data<double>();
+    std::vector<double> a = analytic[i].to_vector();
+    ASSERT_EQ(static_cast<int64_t>(a.size()), diff[i].numel());
+    for (int64_t k = 0; k < diff[i].numel(); ++k) {
+      double orig = x[k];
+      x[k] = orig + eps;
+      double lp = weighted_loss(c, p.inputs, p.weights).item();
+      x[k] = orig - eps;
+      double lm = weighted_loss(c, p.inputs, p.weights).item();
+      x[k] = orig;
+      double numeric = (lp - lm) / (2 * eps);
+      ASSERT_NEAR(a[k], numeric, 1e-6 + 1e-5 * std::abs(numeric))
+          << c.name << ": input " << i << " element " << k;
+    }
+  }
+}
+
+TEST_P(OpTable, F32VsReference) {
+  const OpCase& c = GetParam();
+  Prepared p = prepare(c, 99);
+  std::vector<Tensor> in32;
+  for (auto& t : p.inputs) {
+    Tensor u = t.detach().to(DType::f32);
+    if (t.requires_grad()) u.requires_grad_(true);
+    in32.push_back(u);
+  }
+  Tensor out64 = c.fn(p.inputs);
+  Tensor out32 = c.fn(in32);
+  ASSERT_EQ(out32.dtype(), DType::f32);
+  ASSERT_EQ(out32.shape(), out64.shape());
+  std::vector<double> r = out64.to_vector(), f = out32.to_vector();
+  double scale = std::max(1.0, max_abs(r));
+  for (size_t k = 0; k < r.size(); ++k)
+    ASSERT_NEAR(f[k], r[k], c.f32_tol * scale) << c.name << ": output element " << k;
+
+  std::vector<Tensor> d64, d32;
+  for (size_t i = 0; i < p.inputs.size(); ++i)
+    if (p.inputs[i].requires_grad()) {
+      d64.push_back(p.inputs[i]);
+      d32.push_back(in32[i]);
+    }
+  std::vector<Tensor> g64 = grad(sum(mul(out64, p.weights)), d64);
+  std::vector<Tensor> g32 = grad(sum(mul(out32, p.weights.to(DType::f32))), d32);
+  for (size_t i = 0; i < g64.size(); ++i) {
+    std::vector<double> a = g64[i].to_vector(), b = g32[i].to_vector();
+    double gs = std::max(1.0, max_abs(a));
+    for (size_t k = 0; k < a.size(); ++k)
+      ASSERT_NEAR(b[k], a[k], c.f32_tol * 4 * gs) << c.name << ": gradient of input " << i
+                                                  << " element " << k;
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Ops, OpTable, ::testing::ValuesIn(all_op_cases()),
+                         [](const ::testing::TestParamInfo<OpCase>& i) { return i.param.name; });
+
+TEST(KernelCoverage, EveryOpHasReferenceAndCpuKernels) {
+  const KernelRegistry& r = kernel_registry();
+  for (int i = 0; i < kNumOps; ++i) {
+    OpId op = static_cast<OpId>(i);
+    EXPECT_TRUE(r.has(op, DeviceType::cpu, DType::f64)) << "no reference kernel for " << op_name(op);
+    EXPECT_TRUE(r.has(op, DeviceType::cpu, DType::f32)) << "no fast CPU kernel for " << op_name(op);
+  }
+}
+
+TEST(Autograd, AccumulatesAndFreesGraph) {
+  Tensor x = Tensor::from_vector(std::vector<double>{1, 2, 3}, {3}, DType::f64).requires_grad_();
+  Tensor y = sum(mul(x, x));
+  y.backward();
+  EXPECT_EQ(x.grad().to_vector(), (std::vector<double>{2, 4, 6}));
+  // A second backward through the freed graph is a clear error.
+  EXPECT_THROW(y.backward(), Error);
+  // Gradients accumulate across backward calls.
+  sum(mul_scalar(x, 3.0)).backward();
+  EXPECT_EQ(x.grad().to_vector(), (std::vector<double>{5, 7, 9}));
+  x.zero_grad();
+  EXPECT_FALSE(x.grad().defined());
+}
+
+TEST(Autograd, NoGradGuardRecordsNothing) {
+  Tensor x = Tensor::ones({2, 2}, DType::f64).requires_grad_();
+  NoGradGuard ng;
+  Tensor y = mul(x, x);
+  EXPECT_FALSE(y.requires_grad());
+  EXPECT_EQ(y.grad_fn(), nullptr);
+}
+
+TEST(Autograd, DiamondGraphSumsBothPaths) {
+  // y = a*b + a, with a used twice: dy/da = b + 1.
+  Tensor a = Tensor::from_vector(std::vector<double>{2}, {1}, DType::f64).requires_grad_();
+  Tensor b = Tensor::from_vector(std::vector<double>{5}, {1}, DType::f64).requires_grad_();
+  Tensor y = sum(add(mul(a, b), a));
+  auto g = grad(y, {a, b});
+  EXPECT_DOUBLE_EQ(g[0].item(), 6.0);
+  EXPECT_DOUBLE_EQ(g[1].item(), 2.0);
+}
+
+TEST(Autograd, UnusedBranchDoesNotBlockOthers) {
+  // Comparisons produce no gradient; the path through x must still be reached.
+  Tensor x = Tensor::from_vector(std::vector<double>{1, -2}, {2}, DType::f64).requires_grad_();
+  Tensor m = gt(x, Tensor::zeros({}, DType::f64));
+  Tensor y = sum(where(m, x, mul_scalar(x, 0.5)));
+  y.backward();
+  EXPECT_EQ(x.grad().to_vector(), (std::vector<double>{1.0, 0.5}));
+}
+
+TEST(Tensor, ViewsShareStorageAndBroadcastErrorsAreClear) {
+  Tensor x = Tensor::zeros({2, 3});
+  Tensor v = x.narrow(1, 1, 2);
+  EXPECT_FALSE(v.is_contiguous());
+  EXPECT_EQ(v.storage(), x.storage());
+  EXPECT_THROW(add(Tensor::zeros({2, 3}), Tensor::zeros({4})), Error);
+  EXPECT_THROW(Tensor::zeros({2}).reshape({3}), Error);
+  try {
+    conv2d(Tensor::zeros({1, 3, 4, 4}), Tensor::zeros({2, 4, 3, 3}), Tensor(), Conv2dParams{});
+    FAIL() << "expected an error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("does not match weight"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace cvd::test

@@ -1,0 +1,358 @@
+#include "pipeline/run_stages.h"
+
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <cstring>
+#include <fstream>
+#include <set>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "engine/error.h"
+#include "pipeline/atomic_file.h"
+#include "pipeline/colmap_runner.h"
+#include "pipeline/flow_dis.h"
+#include "pipeline/flow_io.h"
+#include "pipeline/flow_pair.h"
+#include "pipeline/frame_source.h"
+#include "pipeline/trajectory_io.h"
+
+namespace cvd {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+json read_json_if(const fs::path& p) {
+  std::ifstream in(p);
+  if (!in) return json();
+  try {
+    return json::parse(in);
+  } catch (...) {
+    return json();
+  }
+}
+
+void report(const RunOptions& o, const std::string& stage, int done, int total,
+            const std::string& msg = "") {
+  if (o.progress) o.progress({stage, done, total, msg});
+  if (o.cancel && o.cancel->load()) fail(ErrorCategory::cancelled, "cancelled during {}", stage);
+}
+
+}  // namespace
+
+// ---- frames ------------------------------------------------------------------------------------
+cv::Mat FramesStage::load(int k) const {
+  fs::path p = dir / (names.at(k) + ".png");
+  cv::Mat m = cv::imread(p.string(), cv::IMREAD_COLOR);
+  if (m.empty()) fail(ErrorCategory::io, "{}: cached frame missing or unreadable", p.string());
+  return m;
+}
+
+FramesStage run_frames_stage(const RunOptions& o, const fs::path& cache) {
+  FramesStage st;
+  st.dir = cache / "frames";
+  json key = {{"input", fs::absolute(o.input).string()}, {"max_frames", o.max_frames},
+              {"step", o.frame_step}, {"first", o.first_frame}, {"flow_long_side", o.flow_long_side}};
+  json done = read_json_if(st.dir / "frames.json");
+  if (!done.is_null() && done.value("key", json()) == key) {
+    st.names = done["names"].get<std::vector<std::string>>();
+    st.width = done["width"];
+    st.height = done["height"];
+    st.input_width = done["input_width"];
+    st.input_height = done["input_height"];
+    st.fps = done["fps"];
+    spdlog::info("frames: {} cached frames in {}", st.names.size(), st.dir.string());
+    return st;
+  }
+  fs::create_directories(st.dir);
+  FrameSourceOptions fo{o.max_frames, o.frame_step, o.first_frame};
+  FrameSourceInfo info = read_frames(o.input, fo, [&](int k, const std::string& name, const cv::Mat& bgr) {
+    cv::Mat img = bgr;
+    int long_side = std::max(bgr.cols, bgr.rows);
+    if (o.flow_long_side > 0 && long_side > o.flow_long_side) {
+      double s = double(o.flow_long_side) / long_side;
+      cv::resize(bgr, img, cv::Size(std::lround(bgr.cols * s), std::lround(bgr.rows * s)), 0, 0,
+                 cv::INTER_AREA);
+    }
+    fs::path p = st.dir / (name + ".png");
+    write_atomically(p, [&](const fs::path& tmp) {
+      if (!cv::imwrite(tmp.string(), img)) fail(ErrorCategory::io, "{}: cannot write", p.string());
+    });
+    st.width = img.cols;
+    st.height = img.rows;
+    report(o, "frames", k + 1, 0, name);
+  });
+  st.names = info.names;
+  st.input_width = info.width;
+  st.input_height = info.height;
+  st.fps = info.fps;
+  std::set<std::string> unique(st.names.begin(), st.names.end());
+  CVD_CHECK(unique.size() == st.names.size(), "{}: frame names are not unique", o.input.string());
+  json j = {{"key", key}, {"names", st.names}, {"width", st.width}, {"height", st.height},
+            {"input_width", st.input_width}, {"input_height", st.input_height}, {"fps", st.fps}};
+  write_text_file(st.dir / "frames.json", j.dump(1));
+  return st;
+}
+
+// ---- poses -------------------------------------------------------------------------------------
+namespace {
+
+std::optional<Intrinsics> user_intrinsics(const RunOptions& o, const FramesStage& f) {
+  if (o.intrinsics) {
+    Intrinsics k = *o.intrinsics;
+    if (k.width == 0) {
+      k.width = f.input_width;
+      k.height = f.input_height;
+    }
+    validate_intrinsics(k, "--intrinsics");
+    return k.scaled_to(f.width, f.height);
+  }
+  if (o.fov_deg > 0) {
+    CVD_CHECK(o.fov_deg > 5 && o.fov_deg < 170, "--fov {} degrees is implausible (5..170)", o.fov_deg);
+    double fx = 0.5 * f.width / std::tan(0.5 * o.fov_deg * M_PI / 180.0);
+    return Intrinsics{fx, fx, 0.5 * f.width - 0.5, 0.5 * f.height - 0.5, f.width, f.height};
+  }
+  return std::nullopt;
+}
+
+std::vector<FrameCamera> cameras_from_file(const RunOptions& o, const FramesStage& f,
+                                           const Intrinsics& K) {
+  std::vector<Pose> poses;
+  std::vector<FrameCamera> cams(f.names.size());
+  const std::string& fmt_name = o.poses_format;
+  if (fmt_name == "tum" || fmt_name == "kitti") {
+    if (fmt_name == "tum") {
+      for (auto& tp : read_tum_trajectory(o.poses_file)) poses.push_back(tp.pose);
+    } else {
+      poses = read_kitti_trajectory(o.poses_file);
+    }
+    // Poses are matched to the SELECTED frames by source index (first + k * step).
+    for (size_t k = 0; k < f.names.size(); ++k) {
+      size_t src = o.first_frame + k * std::max(1, o.frame_step);
+      if (src >= poses.size())
+        fail(ErrorCategory::invalid_argument,
+             "{}: {} poses, but frame '{}' needs pose #{} (fewer poses than frames)",
+             o.poses_file.string(), poses.size(), f.names[k], src + 1);
+      cams[k] = {f.names[k], poses[src], K, true, 0};
+    }
+  } else if (fmt_name == "colmap") {
+    ColmapModel m = read_colmap_text_model(o.poses_file);
+    for (size_t k = 0; k < f.names.size(); ++k) {
+      const ColmapImage* im = m.find_image(f.names[k]);
+      if (!im) {
+        for (auto& [n, img] : m.images)
+          if (fs::path(n).stem().string() == f.names[k]) im = &img;
+      }
+      cams[k] = {f.names[k], im ? im->pose : Pose{}, K, im != nullptr, 0};
+      if (!im) spdlog::warn("poses: frame '{}' is not in {}", f.names[k], o.poses_file.string());
+    }
+  } else {
+    fail(ErrorCategory::invalid_argument, "unknown poses format '{}' (tum, colmap or kitti)", fmt_name);
+  }
+  return cams;
+}
+
+}  // namespace
+
+PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::path& cache) {
+  auto t0 = std::chrono::steady_clock::now();
+  PosesStage st;
+  st.cameras.resize(f.names.size());
+  st.points.resize(f.names.size());
+  std::optional<Intrinsics> K = user_intrinsics(o, f);
+  st.intrinsics_source = o.intrinsics ? "user (--intrinsics)" : (o.fov_deg > 0 ? "user (--fov)" : "estimated by COLMAP");
+  if (!o.poses_file.empty()) {
+    if (!K)
+      fail(ErrorCategory::invalid_argument,
+           "poses from {} need the camera intrinsics: pass --intrinsics fx,fy,cx,cy or --fov DEG",
+           o.poses_file.string());
+    st.cameras = cameras_from_file(o, f, *K);
+    st.source = o.poses_format + " file " + o.poses_file.string();
+  } else {
+    fs::path dir = cache / "colmap";
+    ColmapOptions co;
+    co.matcher = o.matcher == "exhaustive" ? ColmapMatcher::exhaustive : ColmapMatcher::sequential;
+    co.max_image_size = o.colmap_long_side;
+    co.max_num_features = o.colmap_max_features;
+    co.intrinsics = K;
+    fs::path model_dir = dir / "result_model";
+    ColmapModel model;
+    if (fs::exists(model_dir / "images.txt")) {
+      model = read_colmap_text_model(model_dir);
+      spdlog::info("poses: cached COLMAP model in {}", model_dir.string());
+    } else {
+      report(o, "poses", 0, 1, "running COLMAP");
+      std::vector<ColmapFrame> frames;
+      for (size_t k = 0; k < f.names.size(); ++k) {
+        ColmapFrame cf{f.names[k], f.load(static_cast<int>(k)), cv::Mat()};
+        if (!o.masks.empty()) {
+          fs::path mp = o.masks / (f.names[k] + ".png");
+          if (fs::exists(mp)) {
+            cf.mask = cv::imread(mp.string(), cv::IMREAD_GRAYSCALE);
+            if (cf.mask.size() != cf.image.size()) cv::resize(cf.mask, cf.mask, cf.image.size(), 0, 0, cv::INTER_NEAREST);
+          }
+        }
+        frames.push_back(std::move(cf));
+      }
+      ColmapResult r = run_colmap(frames, dir / "work", co);
+      for (auto& w : r.warnings) spdlog::warn("poses: {}", w);
+      if (!r.unregistered.empty())
+        spdlog::warn("poses: COLMAP did not register {} frame(s): {}", r.unregistered.size(),
+                     fmt::format("{}", fmt::join(r.unregistered, ", ")));
+      model = r.model;
+      st.info = {{"colmap_models", r.num_models}, {"colmap_attempts", r.attempts},
+                 {"colmap_seconds", r.seconds}, {"unregistered", r.unregistered}};
+      write_colmap_text_model(model_dir, model);
+    }
+    for (size_t k = 0; k < f.names.size(); ++k) {
+      const ColmapImage* im = model.find_image(f.names[k]);
+      if (im) {
+        st.cameras[k] = model.frame_camera(f.names[k]);
+        st.points[k] = model.observed_points(f.names[k]);
+      } else {
+        st.cameras[k] = {f.names[k], Pose{}, K ? *K : Intrinsics{}, false, 0};
+      }
+    }
+    // Every registered frame shares one camera; give unregistered frames its intrinsics.
+    for (auto& c : st.cameras)
+      if (c.registered) K = c.intrinsics;
+    for (auto& c : st.cameras)
+      if (!c.registered && K) c.intrinsics = *K;
+    st.source = "colmap";
+  }
+  int registered = 0;
+  for (auto& c : st.cameras) registered += c.registered;
+  CVD_CHECK(registered >= 2, "only {} frame(s) have poses; at least 2 are needed", registered);
+  st.seconds = seconds_since(t0);
+  return st;
+}
+
+// ---- flow --------------------------------------------------------------------------------------
+namespace {
+
+cv::Mat resize_flow(const cv::Mat& flow, cv::Size size) {
+  cv::Mat r;
+  cv::resize(flow, r, size, 0, 0, cv::INTER_LINEAR);
+  double sx = double(size.width) / flow.cols, sy = double(size.height) / flow.rows;
+  for (int y = 0; y < r.rows; ++y)
+    for (int x = 0; x < r.cols; ++x) {
+      auto& v = r.at<cv::Vec2f>(y, x);
+      v[0] = static_cast<float>(v[0] * sx);
+      v[1] = static_cast<float>(v[1] * sy);
+    }
+  return r;
+}
+
+cv::Mat resize_mask(const cv::Mat& m, cv::Size size) {
+  cv::Mat r;
+  cv::resize(m, r, size, 0, 0, cv::INTER_NEAREST);
+  return r;
+}
+
+}  // namespace
+
+FlowStage run_flow_stage(const RunOptions& o, const FramesStage& f, const PosesStage& poses,
+                         cv::Size depth_size, const fs::path& cache) {
+  auto t0 = std::chrono::steady_clock::now();
+  FlowStage st;
+  fs::path dir = cache / "flow";
+  fs::create_directories(dir);
+  // Pairs over the registered frames only (indices map back to frames).
+  std::vector<int> reg;
+  for (size_t k = 0; k < poses.cameras.size(); ++k)
+    if (poses.cameras[k].registered) reg.push_back(static_cast<int>(k));
+  std::vector<FramePair> pairs;
+  for (const FramePair& p : hierarchical_pairs(static_cast<int>(reg.size())))
+    pairs.push_back({reg[p.first], reg[p.second]});
+  CVD_CHECK(o.flow == "dis", "flow method '{}' is not available (use --flow dis)", o.flow);
+  DisFlowOptions dopt;
+  dopt.preset = parse_dis_preset(o.dis_preset);
+  DisFlowEstimator dis(dopt);
+  FlowPairOptions popt;
+  popt.fb_threshold_px = o.fb_threshold_px;
+  json key = {{"method", dis.name()}, {"fb", o.fb_threshold_px}, {"w", depth_size.width},
+              {"h", depth_size.height}, {"frames_w", f.width}};
+  int done = 0;
+  for (const FramePair& p : pairs) {
+    std::string stem = fmt::format("{}__{}", f.names[p.first], f.names[p.second]);
+    fs::path meta = dir / (stem + ".json");
+    FlowPairData d;
+    d.pair = p;
+    json m = read_json_if(meta);
+    if (!m.is_null() && m.value("key", json()) == key) {
+      d.forward_valid = m["forward_valid"];
+      d.backward_valid = m["backward_valid"];
+      if (m["kept"].get<bool>()) {
+        d.forward = read_flo(dir / (stem + ".fwd.flo"));
+        d.backward = read_flo(dir / (stem + ".bwd.flo"));
+        d.forward_mask = cv::imread((dir / (stem + ".fwd_mask.png")).string(), cv::IMREAD_GRAYSCALE);
+        d.backward_mask = cv::imread((dir / (stem + ".bwd_mask.png")).string(), cv::IMREAD_GRAYSCALE);
+      }
+    } else {
+      FlowPairResult r = compute_pair_flow(dis, f.load(p.first), f.load(p.second), popt);
+      d.forward_valid = r.forward_valid_fraction;
+      d.backward_valid = r.backward_valid_fraction;
+      bool kept = r.both_directions_keep(o.min_valid_fraction);
+      if (kept) {
+        d.forward = resize_flow(r.forward, depth_size);
+        d.backward = resize_flow(r.backward, depth_size);
+        d.forward_mask = resize_mask(r.forward_mask, depth_size);
+        d.backward_mask = resize_mask(r.backward_mask, depth_size);
+        write_flo(dir / (stem + ".fwd.flo"), d.forward);
+        write_flo(dir / (stem + ".bwd.flo"), d.backward);
+        for (auto [suffix, mat] : {std::pair{".fwd_mask.png", &d.forward_mask}, {".bwd_mask.png", &d.backward_mask}}) {
+          fs::path mp = dir / (stem + suffix);
+          write_atomically(mp, [&](const fs::path& tmp) {
+            if (!cv::imwrite(tmp.string(), *mat)) fail(ErrorCategory::io, "{}: cannot write", mp.string());
+          });
+        }
+      }
+      json mj = {{"key", key}, {"kept", kept}, {"forward_valid", d.forward_valid},
+                 {"backward_valid", d.backward_valid}, {"homography_fallback", r.homography.reason}};
+      write_text_file(meta, mj.dump());
+    }
+    if (!d.forward.empty())
+      st.pairs.push_back(std::move(d));
+    else
+      ++st.dropped;
+    report(o, "flow", ++done, static_cast<int>(pairs.size()), stem);
+  }
+  if (st.pairs.empty())
+    fail(ErrorCategory::invalid_argument,
+         "flow: no frame pair kept {:.0f}% consistent pixels in both directions ({} pairs tried); "
+         "the video may be too short, too blurry or too fast",
+         100 * o.min_valid_fraction, pairs.size());
+  st.seconds = seconds_since(t0);
+  return st;
+}
+
+Tensor frame_tensor(const cv::Mat& bgr, cv::Size size) {
+  cv::Mat rgb, r;
+  cv::resize(bgr, r, size, 0, 0, size.width < bgr.cols ? cv::INTER_AREA : cv::INTER_LINEAR);
+  cv::cvtColor(r, rgb, cv::COLOR_BGR2RGB);
+  Tensor t = Tensor::empty({3, size.height, size.width});
+  float* p = t.data<float>();
+  int64_t hw = int64_t(size.height) * size.width;
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 0; x < size.width; ++x) {
+      const cv::Vec3b& v = rgb.at<cv::Vec3b>(y, x);
+      for (int c = 0; c < 3; ++c) p[c * hw + int64_t(y) * size.width + x] = v[c] / 255.0f;
+    }
+  return t;
+}
+
+cv::Mat depth_to_mat(const Tensor& d) {
+  Tensor c = d.detach().to(DType::f32).contiguous();
+  cv::Mat m(static_cast<int>(c.size(0)), static_cast<int>(c.size(1)), CV_32F);
+  std::memcpy(m.data, c.data<float>(), c.nbytes());
+  return m;
+}
+
+}  // namespace cvd

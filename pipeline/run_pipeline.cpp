@@ -299,7 +299,12 @@ RunResult run_pipeline(const RunOptions& o) {
   res.epoch_losses = tr.epoch_losses;
   info["network"] = net_desc;
   info["depth_size"] = {dsize.width, dsize.height};
-  info["frames"] = {{"count", n}, {"registered", registered}, {"input_size", {frames.input_width, frames.input_height}}};
+  info["frame_stats"] = {{"count", n}, {"registered", registered}, {"input_size", {frames.input_width, frames.input_height}}};
+  // The frames of poses.txt, in its order (registered frames only), for `cvd eval`.
+  json frame_list = json::array();
+  for (int k = 0; k < n; ++k)
+    if (cams[k].registered) frame_list.push_back({{"name", frames.names[k]}, {"timestamp", k / frames.fps}});
+  info["frames"] = frame_list;
   info["poses"] = {{"source", poses.source}, {"intrinsics_source", poses.intrinsics_source},
                    {"intrinsics_depth_res", {cams[0].intrinsics.fx, cams[0].intrinsics.fy, cams[0].intrinsics.cx, cams[0].intrinsics.cy}},
                    {"details", poses.info}};

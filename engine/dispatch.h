@@ -39,7 +39,11 @@ namespace cvd {
   X(grid_sample)         /* in: x, grid; out: y; GridSampleParams                */   \
   X(grid_sample_backward)/* in: gy, x, grid; out: gx, ggrid                      */   \
   X(adam_update)         /* in: param, grad, m, v (updated in place); AdamParams */   \
-  X(sgd_update)          /* in: param, grad, buf (updated in place); SgdParams   */
+  X(sgd_update)          /* in: param, grad, buf (updated in place); SgdParams   */   \
+  X(correlation)         /* in: a, b; out: y; CorrelationParams                  */   \
+  X(correlation_backward)/* in: gy, a, b; out: ga?, gb?; CorrelationParams       */   \
+  X(channel_norm)        /* in: x; out: y [N,1,H,W]                              */   \
+  X(channel_norm_backward) /* in: gy, x, y; out: gx                              */
 
 enum class OpId : int {
 #define CVD_X(name) name,

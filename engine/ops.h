@@ -88,6 +88,13 @@ Tensor linear(const Tensor& x, const Tensor& w, const Tensor& b);
 // x [N, C, H, W]; grid [N, Ho, Wo, 2] -> [N, C, Ho, Wo].
 Tensor grid_sample(const Tensor& x, const Tensor& grid, const GridSampleParams& p);
 
+// ---- Optical flow (FlowNet2) -------------------------------------------------------------------
+// FlowNetC correlation of a, b [N, C, H, W] -> [N, D*D, Ho, Wo] (definition: CorrelationParams).
+Tensor correlation(const Tensor& a, const Tensor& b, const CorrelationParams& p);
+// FlowNet2 ChannelNorm: sqrt(sum_c x^2), [N, C, H, W] -> [N, 1, H, W]. Its gradient x / norm is
+// defined as 0 where the norm is 0.
+Tensor channel_norm(const Tensor& x);
+
 // Output spatial size of a convolution / pooling along one dim (floor or ceil mode).
 int64_t conv_out_size(int64_t in, int k, int stride, int pad_before, int pad_after, int dilation);
 int64_t pool_out_size(int64_t in, int k, int stride, int pad_before, int pad_after, bool ceil_mode);

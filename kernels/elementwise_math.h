@@ -15,6 +15,7 @@ namespace cvd {
 
 template <class T>
 CVD_HOST_DEVICE T unary_forward(UnaryOp op, T x, T a, T b) {
+  using std::exp, std::log, std::pow, std::sqrt, std::tanh;  // float overloads for float
   switch (op) {
     case UnaryOp::relu: return x > T(0) ? x : T(0);
     case UnaryOp::clip: return x < a ? a : (x > b ? b : x);
@@ -37,6 +38,7 @@ CVD_HOST_DEVICE T unary_forward(UnaryOp op, T x, T a, T b) {
 // d(unary)/dx times gy, from the input x and the output y.
 template <class T>
 CVD_HOST_DEVICE T unary_backward(UnaryOp op, T gy, T x, T y, T a, T b) {
+  using std::pow;
   switch (op) {
     case UnaryOp::relu: return x > T(0) ? gy : T(0);
     case UnaryOp::clip: return (x > a && x < b) ? gy : T(0);
@@ -132,17 +134,16 @@ CVD_HOST_DEVICE LinearResizeTaps<T> resize_linear_taps(long o, long in, long out
 template <class T>
 CVD_HOST_DEVICE T grid_source_coord(T g, long size, GridPadding padding, bool align_corners,
                                     T* dcoord) {
-  T c = grid_unnormalize<T>(g, size, align_corners);
-  T d = grid_unnormalize_scale<T>(size, align_corners);
-  if (padding == GridPadding::border) {
-    if (c <= T(0)) {
-      c = T(0), d = T(0);
-    } else if (c >= T(size - 1)) {
-      c = T(size - 1), d = T(0);
-    }
+  const T c = grid_unnormalize<T>(g, size, align_corners);
+  const T d = grid_unnormalize_scale<T>(size, align_corners);
+  if (padding != GridPadding::border) {
+    *dcoord = d;
+    return c;
   }
-  *dcoord = d;
-  return c;
+  const T hi = T(size - 1);
+  const bool below = c <= T(0), above = c >= hi;  // selects, no branches: vectorisable
+  *dcoord = (below | above) ? T(0) : d;
+  return below ? T(0) : (above ? hi : c);
 }
 
 // ---- Optimiser steps, one element (PyTorch torch.optim semantics, see kernel_params.h) ---------

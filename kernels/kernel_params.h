@@ -127,4 +127,31 @@ struct SgdParams {
   bool first_step = true;
 };
 
+// FlowNetC correlation (flownet2-pytorch Correlation(pad_size, kernel_size, max_displacement,
+// stride1, stride2)) of a, b [N, C, H, W] -> [N, D*D, Ho, Wo] with r = max_displacement / stride2,
+// D = 2r + 1, k = kernel_size (odd), kr = (k - 1) / 2, border = max_displacement + kr,
+// Ho = ceil((H + 2 pad - 2 border) / stride1) (likewise Wo). With the patch centre
+// (y, x) = (oy * stride1 + border - pad, ox * stride1 + border - pad):
+//   y[n, (tj + r) * D + (ti + r), oy, ox] = 1 / (k^2 C) * sum_{c, |dj|, |di| <= kr}
+//       a[n, c, y + dj, x + di] * b[n, c, y + dj + tj * stride2, x + di + ti * stride2]
+// for ti, tj in [-r, r]; reads outside the image are 0 (zero padding). For kernel_size 1 (the
+// only size FlowNet2 uses) this is flownet2-pytorch's CUDA kernel exactly; for k > 1 the patch
+// is centred at border as in the original Caffe layer (flownet2-pytorch centres it kr earlier).
+struct CorrelationParams {
+  int pad = 0;
+  int kernel_size = 1;
+  int max_displacement = 1;
+  int stride1 = 1;
+  int stride2 = 1;
+  int displacement_radius() const { return max_displacement / stride2; }
+  int displacement_size() const { return 2 * displacement_radius() + 1; }
+  int kernel_radius() const { return (kernel_size - 1) / 2; }
+  int border() const { return max_displacement + kernel_radius(); }
+  // Output size along one dim of input size `in` (ceil division as flownet2-pytorch).
+  int64_t out_size(int64_t in) const {
+    const int64_t span = in + 2 * static_cast<int64_t>(pad) - 2 * static_cast<int64_t>(border());
+    return span <= 0 ? 0 : (span + stride1 - 1) / stride1;
+  }
+};
+
 }  // namespace cvd

@@ -30,6 +30,12 @@ class DepthNet : public Module {
   // network (e.g. log of the scene's median depth for Mannequin).
   virtual Tensor output_bias() = 0;
 
+  // Module name prefixes in the order forward_raw first runs them, for matching the layers of
+  // an imported graph by structure (models/onnx_weights.h). A prefix stands for all layers under
+  // it in registration order; modules the forward never runs (e.g. MiDaS v2's
+  // scratch.refinenet4.resConfUnit1) are left out. Default {""}: registration order.
+  virtual std::vector<std::string> execution_order() const { return {""}; }
+
   // Positive depth from the raw output: [N, 1, H, W].
   Tensor depth_from_raw(const Tensor& raw) const;
   // Positive depth for RGB in [0, 1]: [N, 1, H, W]. Recorded for autograd in grad mode.

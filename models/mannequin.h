@@ -25,6 +25,10 @@ class MannequinNet : public DepthNet {
   Tensor forward_raw(const Tensor& x) override;
   Tensor output_bias() override;
   std::string type_name() const override { return "HourglassModel"; }
+  // The forward returns (pred, confidence): pred_layer runs before uncertainty_layer.
+  std::vector<std::string> execution_order() const override {
+    return {"seq", "pred_layer", "uncertainty_layer"};
+  }
   // The confidence map in (0, 1) (unused by CVD).
   Tensor confidence(const Tensor& x);
 

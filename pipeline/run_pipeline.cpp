@@ -45,7 +45,14 @@ std::unique_ptr<DepthNet> load_network(const RunOptions& o, std::string& descrip
     width = r.header().config.is_object() ? r.header().config.value("width", 1.0) : 1.0;
   }
   Generator gen(o.seed);
-  std::unique_ptr<DepthNet> net = create_depth_net(arch, width, gen);
+  std::unique_ptr<DepthNet> net;
+  try {
+    net = create_depth_net(arch, width, gen);
+  } catch (const Error& e) {
+    if (o.model.empty()) throw;
+    fail(ErrorCategory::invalid_argument, "{}: not a depth network weights file: {}",
+         o.model.string(), e.what());
+  }
   if (!o.model.empty()) {
     load_weights(*net, o.model, true);
     description = fmt::format("{} from {}", arch, o.model.string());
@@ -177,7 +184,14 @@ RunResult run_pipeline(const RunOptions& o) {
   auto t_all = Clock::now();
   CVD_CHECK(!o.input.empty(), "no input video or folder given");
   CVD_CHECK(!o.out.empty(), "no output directory given");
-  fs::create_directories(o.out);
+  // Check the input before creating anything, so a typo leaves no output folder behind.
+  std::error_code ec;
+  if (!fs::exists(o.input, ec))
+    fail(ErrorCategory::io, "{}: no such file or directory", o.input.string());
+  fs::create_directories(o.out, ec);
+  if (ec || !fs::is_directory(o.out))
+    fail(ErrorCategory::io, "{}: cannot create the output directory ({})", o.out.string(),
+         ec ? ec.message() : "a file of that name exists");
   fs::path cache = o.out / "cache";
   json info = {{"version", CVD_VERSION}, {"input", o.input.string()}, {"backends", compiled_backends()}};
   json timings;

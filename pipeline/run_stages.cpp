@@ -13,6 +13,7 @@
 #include "pipeline/atomic_file.h"
 #include "pipeline/colmap_runner.h"
 #include "pipeline/flow_dis.h"
+#include "pipeline/flow_flownet2.h"
 #include "pipeline/flow_io.h"
 #include "pipeline/flow_pair.h"
 #include "pipeline/frame_source.h"
@@ -271,15 +272,24 @@ FlowStage run_flow_stage(const RunOptions& o, const FramesStage& f, const PosesS
   std::vector<FramePair> pairs;
   for (const FramePair& p : hierarchical_pairs(static_cast<int>(reg.size())))
     pairs.push_back({reg[p.first], reg[p.second]});
-  CVD_CHECK(o.flow == "dis", "flow method '{}' is not available (use --flow dis)", o.flow);
-  DisFlowOptions dopt;
-  dopt.preset = parse_dis_preset(o.dis_preset);
-  DisFlowEstimator dis(dopt);
+  std::unique_ptr<FlowEstimator> estimator;
+  if (o.flow == "flownet2") {
+    CVD_CHECK(!o.flow_model.empty(),
+              "--flow flownet2 needs --flow-model FILE.cvdw (no pretrained weights ship; see cvd convert)");
+    estimator = std::make_unique<FlowNet2Estimator>(o.flow_model);
+  } else {
+    CVD_CHECK(o.flow == "dis", "unknown flow method '{}' (dis or flownet2)", o.flow);
+    DisFlowOptions dopt;
+    dopt.preset = parse_dis_preset(o.dis_preset);
+    estimator = std::make_unique<DisFlowEstimator>(dopt);
+  }
+  FlowEstimator& dis = *estimator;
   FlowPairOptions popt;
   popt.fb_threshold_px = o.fb_threshold_px;
   json key = {{"method", dis.name()}, {"fb", o.fb_threshold_px}, {"w", depth_size.width},
               {"h", depth_size.height}, {"frames_w", f.width}};
   int done = 0;
+  std::map<int, ImageKeypoints> keypoint_cache;
   for (const FramePair& p : pairs) {
     std::string stem = fmt::format("{}__{}", f.names[p.first], f.names[p.second]);
     fs::path meta = dir / (stem + ".json");
@@ -296,7 +306,15 @@ FlowStage run_flow_stage(const RunOptions& o, const FramesStage& f, const PosesS
         d.backward_mask = cv::imread((dir / (stem + ".bwd_mask.png")).string(), cv::IMREAD_GRAYSCALE);
       }
     } else {
-      FlowPairResult r = compute_pair_flow(dis, f.load(p.first), f.load(p.second), popt);
+      // Keypoints are detected once per frame and reused by every pair that frame is in.
+      auto keypoints = [&](int k, const cv::Mat& img) -> const ImageKeypoints& {
+        auto it = keypoint_cache.find(k);
+        if (it == keypoint_cache.end()) it = keypoint_cache.emplace(k, detect_keypoints(img, popt.homography)).first;
+        return it->second;
+      };
+      cv::Mat img_i = f.load(p.first), img_j = f.load(p.second);
+      FlowPairResult r = compute_pair_flow(dis, img_i, img_j, popt, &keypoints(p.first, img_i),
+                                           &keypoints(p.second, img_j));
       d.forward_valid = r.forward_valid_fraction;
       d.backward_valid = r.backward_valid_fraction;
       bool kept = r.both_directions_keep(o.min_valid_fraction);

@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
+#include <limits>
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -100,6 +102,44 @@ Tensor batch_loss(const std::map<int, Tensor>& depths, const std::vector<const T
   return mul_scalar(total, 1.0 / static_cast<double>(batch.size()));
 }
 
+// Fault injection for the reliability tests: CVD_FAULT_NAN_LOSS_STEPS="1,3" treats the loss of
+// those training steps (1-based, counted over all epochs: epoch e's step s is
+// (e - 1) * steps_per_epoch + s) as NaN; "all" makes every loss NaN. Unset: no effect.
+struct NanLossFault {
+  bool all = false;
+  std::vector<int> steps;
+  bool hits(int step) const {
+    return all || std::find(steps.begin(), steps.end(), step) != steps.end();
+  }
+};
+
+NanLossFault nan_loss_fault_from_env() {
+  NanLossFault f;
+  const char* v = std::getenv("CVD_FAULT_NAN_LOSS_STEPS");
+  if (!v || !*v) return f;
+  std::string s(v);
+  if (s == "all") {
+    f.all = true;
+  } else {
+    size_t pos = 0;
+    while (pos <= s.size()) {
+      size_t end = s.find(',', pos);
+      if (end == std::string::npos) end = s.size();
+      std::string item = s.substr(pos, end - pos);
+      try {
+        f.steps.push_back(std::stoi(item));
+      } catch (...) {
+        fail(ErrorCategory::invalid_argument,
+             "CVD_FAULT_NAN_LOSS_STEPS='{}': '{}' is not a step number (use e.g. 1,3 or all)", s,
+             item);
+      }
+      pos = end + 1;
+    }
+  }
+  spdlog::warn("fault injection: CVD_FAULT_NAN_LOSS_STEPS={} (these training losses become NaN)", s);
+  return f;
+}
+
 }  // namespace
 
 TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& load_frame,
@@ -125,6 +165,7 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
   }
   GeometricLossOptions lo;
   lo.lambda_disparity = o.lambda_disparity;
+  const NanLossFault nan_fault = nan_loss_fault_from_env();
   net.train(true);
   std::vector<size_t> order(pairs.size());
   int steps_per_epoch = static_cast<int>((pairs.size() + o.batch_pairs - 1) / o.batch_pairs);
@@ -141,6 +182,8 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
       adam.zero_grad();
       Tensor loss = batch_loss(batch_depths(net, load_frame, batch), batch, lo);
       double v = loss.item();
+      if (nan_fault.hits(epoch * steps_per_epoch + s + 1))
+        v = std::numeric_limits<double>::quiet_NaN();
       if (!std::isfinite(v)) {
         ++result.skipped_steps;
         spdlog::warn("training: epoch {} step {}: non-finite loss, step skipped", epoch + 1, s + 1);
@@ -155,8 +198,9 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
     }
     if (counted == 0)
       fail(ErrorCategory::numerical,
-           "training diverged: every step of epoch {} had a non-finite loss ({} skipped)", epoch + 1,
-           result.skipped_steps);
+           "training diverged: every step of epoch {} had a non-finite loss ({} steps skipped in "
+           "all); try a lower --lr, or check the poses and flow",
+           epoch + 1, result.skipped_steps);
     double mean_loss = sum / counted;
     result.epoch_losses.push_back(mean_loss);
     if (o.on_epoch) o.on_epoch(epoch + 1, mean_loss);

@@ -180,6 +180,30 @@ std::vector<OpCase> all_op_cases() {
                    [p](const In& t) { return grid_sample(t[0], t[1], p); }});
     }
   }
+  // ---- correlation (FlowNetC) and channel_norm ----
+  // {pad, kernel_size, max_displacement, stride1, stride2}
+  struct CorrCase {
+    const char* name;
+    CorrelationParams p;
+    Shape x;
+  };
+  for (const CorrCase& cc : {
+           // FlowNetC's (pad 20, k 1, d 20, s1 1, s2 2) scaled down by 5: 9 displacements.
+           CorrCase{"correlation_flownetc_small", {4, 1, 4, 1, 2}, {2, 3, 5, 6}},
+           CorrCase{"correlation_k3_s1_2", {2, 3, 1, 2, 1}, {1, 2, 6, 7}},
+           CorrCase{"correlation_unpadded", {0, 1, 1, 1, 1}, {1, 3, 4, 5}},
+           CorrCase{"correlation_pad_gt_border", {3, 1, 2, 2, 2}, {1, 2, 5, 4}},
+       }) {
+    c.push_back({cc.name, {{cc.x}, {cc.x}}, [p = cc.p](const In& t) {
+                   return correlation(t[0], t[1], p);
+                 }});
+  }
+  c.push_back({"correlation_same_input", {{{1, 4, 5, 5}}}, [](const In& t) {
+                 return correlation(t[0], t[0], CorrelationParams{2, 1, 2, 1, 1});
+               }});
+  c.push_back({"channel_norm", {{{2, 3, 4, 5}, Init::away_from_zero}}, [](const In& t) {
+                 return channel_norm(t[0]);
+               }});
   return c;
 }
 

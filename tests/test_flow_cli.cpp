@@ -102,7 +102,8 @@ TEST_F(FlowCli, RejectsUnknownPresetAndMethod) {
   EXPECT_NE(r.output.find("slow"), std::string::npos) << r.output;
   r = test::run_cvd(fmt::format("flow {} {} -o {} --method flownet2", a_.string(), b_.string(),
                                 (dir_ / "f.flo").string()));
-  EXPECT_EQ(r.exit_code, 7) << r.output;  // kExitUnsupported until FlowNet2 lands
+  EXPECT_EQ(r.exit_code, 3) << r.output;  // FlowNet2 needs --model (no weights ship)
+  EXPECT_NE(r.output.find("--model"), std::string::npos) << r.output;
 }
 
 }  // namespace

@@ -119,7 +119,7 @@ TEST(GeometricLoss, ZeroWhenDepthPosesAndFlowAgree) {
   EXPECT_LT(l.disparity.item(), 1e-9);
   // A wrong depth is penalised.
   GeometricLoss wrong = geometric_loss_pair(mul_scalar(d, 1.5), d, ij, ji, {});
-  EXPECT_GT(wrong.spatial.item(), 0.2);
+  EXPECT_GT(wrong.spatial.item(), 0.15);  // one direction off by 1/3 px, the other exact
   EXPECT_GT(wrong.disparity.item(), 0.5);
 }
 

@@ -47,6 +47,12 @@ void upsample_nearest2d_backward(const KernelArgs& a);
 void grid_sample(const KernelArgs& a);
 void grid_sample_backward(const KernelArgs& a);
 
+// ---- Optical flow (reference_correlation.cpp) --------------------------------------------------
+void correlation(const KernelArgs& a);
+void correlation_backward(const KernelArgs& a);
+void channel_norm(const KernelArgs& a);
+void channel_norm_backward(const KernelArgs& a);
+
 // ---- Optimiser steps (reference_optim.cpp) -----------------------------------------------------
 void adam_update(const KernelArgs& a);
 void sgd_update(const KernelArgs& a);

@@ -29,10 +29,9 @@ LinearTaps linear_taps(int64_t o, int64_t in, int64_t out, bool align_corners) {
   return {i0, i1, 1.0 - w1, w1};
 }
 
-// PyTorch "nearest": floor(o * in / out), computed exactly in integers.
-int64_t nearest_source(int64_t o, int64_t in, int64_t out) {
-  return std::min((o * in) / out, in - 1);
-}
+// PyTorch "nearest": floor(o * scale) with PyTorch's float32 scale in / out (shared with the
+// fast kernels, so sizes where float rounding moves the index agree with PyTorch).
+int64_t nearest_source(int64_t o, int64_t in, int64_t out) { return nearest_source_index(o, in, out); }
 
 // x [N, C, H, W] and y [N, C, OH, OW] with equal N, C; returns N * C.
 int64_t resize_planes(const Tensor& x, const Tensor& y) {
@@ -136,15 +135,9 @@ struct GridCoord {
 };
 
 GridCoord grid_coord(double g, int64_t size, const GridSampleParams& p) {
-  double pos = grid_unnormalize<double>(g, size, p.align_corners);
-  double dpos = grid_unnormalize_scale<double>(size, p.align_corners);
-  if (p.padding == GridPadding::border) {  // clip to [0, size - 1]; gradient 0 outside
-    if (pos < 0.0) {
-      pos = 0.0, dpos = 0.0;
-    } else if (pos > static_cast<double>(size - 1)) {
-      pos = static_cast<double>(size - 1), dpos = 0.0;
-    }
-  }
+  // Border padding clips to [0, size - 1] with zero gradient at and beyond the limits (PyTorch).
+  double dpos = 0.0;
+  double pos = grid_source_coord<double>(g, size, p.padding, p.align_corners, &dpos);
   return {pos, dpos};
 }
 

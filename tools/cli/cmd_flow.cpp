@@ -1,16 +1,18 @@
-// `cvd flow A B -o F.flo`: dense optical flow of one image pair (DIS; FlowNet2 later), with the
+// `cvd flow A B -o F.flo`: dense optical flow of one image pair (DIS or FlowNet2), with the
 // homography pre-warp, forward-backward mask, visualisation and optional end-point error against
 // a ground-truth .flo (used by bench/sintel_epe.sh).
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
 #include <chrono>
+#include <memory>
 #include <filesystem>
 #include <string>
 
 #include "engine/error.h"
 #include "pipeline/flow_dis.h"
 #include "pipeline/flow_epe.h"
+#include "pipeline/flow_flownet2.h"
 #include "pipeline/flow_io.h"
 #include "pipeline/flow_pair.h"
 #include "pipeline/flow_visualize.h"
@@ -23,6 +25,7 @@ namespace {
 struct FlowArgs {
   std::string image_a, image_b, output;
   std::string method = "dis";
+  std::string model;  // FlowNet2 weights (.cvdw) for --method flownet2
   std::string preset = "medium";
   std::string detector = "sift";
   bool no_homography = false;
@@ -40,9 +43,10 @@ cv::Mat read_gt_mask(const std::string& path, cv::Size size) {
 }
 
 void run_flow(const FlowArgs& a) {
-  if (a.method == "flownet2")
-    fail(ErrorCategory::unsupported, "flow method 'flownet2' is not available in this build yet");
-  CVD_CHECK(a.method == "dis", "unknown flow method '{}' (expected dis)", a.method);
+  CVD_CHECK(a.method == "dis" || a.method == "flownet2",
+            "unknown flow method '{}' (expected dis or flownet2)", a.method);
+  CVD_CHECK(a.method != "flownet2" || !a.model.empty(),
+            "--method flownet2 needs --model F.cvdw (FlowNet2 weights, e.g. from cvd convert)");
   DisFlowOptions dis;
   dis.preset = parse_dis_preset(a.preset);
   FlowPairOptions opt;
@@ -56,7 +60,12 @@ void run_flow(const FlowArgs& a) {
     fail(ErrorCategory::invalid_argument, "image sizes differ: '{}' is {}x{} but '{}' is {}x{}",
          a.image_a, img_a.cols, img_a.rows, a.image_b, img_b.cols, img_b.rows);
 
-  DisFlowEstimator estimator(dis);
+  std::unique_ptr<FlowEstimator> estimator_ptr;
+  if (a.method == "flownet2")
+    estimator_ptr = std::make_unique<FlowNet2Estimator>(a.model);
+  else
+    estimator_ptr = std::make_unique<DisFlowEstimator>(dis);
+  FlowEstimator& estimator = *estimator_ptr;
   const auto t0 = std::chrono::steady_clock::now();
   const FlowPairResult r = compute_pair_flow(estimator, img_a, img_b, opt);
   const double seconds =
@@ -109,8 +118,9 @@ const CommandRegistration registration(40, [](CLI::App& app) {
   sub->add_option("A", args->image_a, "First image")->required();
   sub->add_option("B", args->image_b, "Second image")->required();
   sub->add_option("-o,--output", args->output, "Forward flow A -> B (.flo)")->required();
-  sub->add_option("--method", args->method, "Flow method: dis (flownet2 comes later)")
+  sub->add_option("--method", args->method, "Flow method: dis or flownet2 (needs --model)")
       ->capture_default_str();
+  sub->add_option("--model", args->model, "FlowNet2 weights (.cvdw) for --method flownet2");
   sub->add_option("--preset", args->preset, "DIS preset: ultrafast, fast or medium")
       ->capture_default_str();
   sub->add_option("--detector", args->detector, "Homography keypoints: sift or orb")

@@ -3,7 +3,9 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <filesystem>
 
+#include "engine/backend_info.h"
 #include "engine/error.h"
 #include "tools/cli/command.h"
 
@@ -44,7 +46,13 @@ int main(int argc, char** argv) {
   using namespace cvd::cli;
   CLI::App app{"cvd: consistent video depth (Luo et al. 2020) in native C++"};
   app.require_subcommand(1);
-  app.set_version_flag("--version", std::string("cvd ") + CVD_VERSION);
+  // --version: the build's backends and the devices usable now (a missing GPU is not an error).
+  app.set_version_flag("--version", [] {
+    std::string v = std::string("cvd ") + CVD_VERSION + "\ncompiled backends:";
+    for (const std::string& b : cvd::compiled_backends()) v += "\n  " + b;
+    v += "\nCUDA at run time: " + cvd::cuda_runtime_status();
+    return v;
+  });
   auto& g = global_options();
   app.add_flag("-q,--quiet", g.quiet, "Only print errors and the final summary");
   app.add_flag("-v,--verbose", g.verbose, "Print debug detail");
@@ -59,6 +67,11 @@ int main(int argc, char** argv) {
   } catch (const cvd::Error& e) {
     std::fprintf(stderr, "cvd: error: %s\n", e.what());
     return exit_code_for(e.category());
+  } catch (const std::filesystem::filesystem_error& e) {
+    // A file system call without its own error handling: still an I/O error naming the path.
+    std::fprintf(stderr, "cvd: error: %s: %s\n", e.path1().string().c_str(),
+                 e.code().message().c_str());
+    return kExitIo;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "cvd: internal error: %s\n", e.what());
     return kExitFailure;

@@ -1,0 +1,51 @@
+// Shared by the api/*.cpp sources: the internal headers (which define cvd::Error, cvd::Device,
+// cvd::FlowEstimator and cvd::FrameCamera of the engine and pipeline) come first, then aliases
+// for the internal names that the public API reuses in its inline namespace cvd::v1, then the
+// public headers, then the conversions between the public plain types and cv::Mat.
+#pragma once
+// cvd::Error is thrown across the shared library's boundary: give its type info default visibility.
+#pragma GCC visibility push(default)
+#include "engine/error.h"
+#pragma GCC visibility pop
+
+#include <opencv2/core.hpp>
+
+// Every internal header any api/*.cpp needs is included here, before the public headers: after
+// them, the internal names cvd::Device, cvd::FlowEstimator and cvd::FrameCamera are ambiguous.
+#include "engine/autograd.h"
+#include "engine/backend_info.h"
+#include "engine/cvdw.h"
+#include "engine/dtype.h"
+#include "engine/module_weights.h"
+#include "engine/ops.h"
+#include "engine/random.h"
+#include "models/depth_net.h"
+#include "pipeline/camera.h"
+#include "pipeline/flow_dis.h"
+#include "pipeline/flow_estimator.h"
+#include "pipeline/flow_flownet2.h"
+#include "pipeline/flow_pair.h"
+#include "pipeline/frame_source.h"
+#include "pipeline/run_pipeline.h"
+#include "pipeline/run_stages.h"
+
+namespace cvd::api_bridge {
+using CoreDevice = ::cvd::Device;
+using CoreFlowEstimator = ::cvd::FlowEstimator;
+using CoreFrameCamera = ::cvd::FrameCamera;
+using CoreIntrinsics = ::cvd::Intrinsics;
+}  // namespace cvd::api_bridge
+
+#include "cvd/cvd.h"
+
+namespace cvd::api_bridge {
+
+// 8-bit BGR copy of an RGB / gray / RGBA view (what the pipeline's stages take).
+cv::Mat bgr_from_view(const v1::ImageView& view, const char* what);
+v1::Image image_from_bgr(const cv::Mat& bgr);
+// A CV_32F matrix as a DepthMap.
+v1::DepthMap depth_map_from_mat(const cv::Mat& depth);
+CoreIntrinsics to_core(const v1::CameraIntrinsics& k);
+v1::CameraIntrinsics to_public(const CoreIntrinsics& k);
+
+}  // namespace cvd::api_bridge

@@ -1,0 +1,112 @@
+// cvd::Pipeline: the whole consistent-video-depth run (frames -> poses -> initial depth -> flow ->
+// test-time training -> outputs), the library form of `cvd run`. Every `cvd run` flag is a field
+// of PipelineOptions (the flag is named next to it).
+#pragma once
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "cvd/error.h"
+#include "cvd/export.h"
+#include "cvd/types.h"
+
+namespace cvd {
+inline namespace v1 {
+
+/// One progress report: `done` of `total` units of `stage` ("frames", "poses", "initial depth",
+/// "flow", "warm-up", "training", "outputs", ...). Within a stage, `done` only grows; `total` is 0
+/// while the stage's size is not known yet (e.g. frames of a video being decoded).
+struct PipelineProgress {
+  std::string stage;
+  int done = 0, total = 0;
+  std::string message;  // e.g. "epoch 3/20 loss 1.234"; may be empty
+};
+
+struct PipelineOptions {
+  std::string input;  ///< `INPUT`: a video file or a folder of frames
+  /// `-o`: output directory (outputs + resumable stage caches; rerunning resumes). Empty = a
+  /// temporary directory removed after the run (results are then only returned in memory).
+  std::string out;
+
+  // Frames
+  int max_frames = 0;         ///< --max-frames (0 = all)
+  int frame_step = 1;         ///< --frame-step
+  int first_frame = 0;        ///< --first-frame
+  int depth_long_side = 384;  ///< --depth-size: network resolution (aligned to the model)
+  int flow_long_side = 1024;  ///< --flow-size: flow resolution (never upscaled)
+
+  // Depth network
+  std::string model;               ///< --model: .cvdw; empty = the default untrained network
+  std::string arch = "mannequin";  ///< --arch: mannequin | midas_small | midas_v2
+  double width = 0.25;             ///< --width: width multiplier of the default network
+
+  // Poses
+  std::string poses_file;                      ///< --poses: poses file instead of running COLMAP
+  std::string poses_format = "tum";            ///< --poses-format: tum | colmap | kitti
+  std::optional<CameraIntrinsics> intrinsics;  ///< --intrinsics (input resolution; width/height
+                                               ///< may be 0 = the frames')
+  double fov_deg = 0;                  ///< --fov: horizontal FoV when intrinsics are unknown
+  std::string matcher = "sequential";  ///< --matcher: sequential | exhaustive
+  int colmap_long_side = 640;          ///< --colmap-size
+  int colmap_max_features = 4096;      ///< --colmap-features
+  std::string masks;                   ///< --masks: folder of masks passed to COLMAP
+
+  // Flow
+  std::string flow = "dis";           ///< --flow: dis | flownet2
+  std::string dis_preset = "medium";  ///< --dis-preset: ultrafast | fast | medium
+  std::string flow_model;             ///< --flow-model: FlowNet2 .cvdw
+  double min_valid_fraction = 0.2;    ///< --min-valid
+  float fb_threshold_px = 1.0f;       ///< --fb-threshold
+
+  // Training (<= 0: the architecture's default)
+  int epochs = 20;               ///< --epochs
+  int batch_pairs = 4;           ///< --batch
+  double lr = 0;                 ///< --lr
+  double lambda_disparity = -1;  ///< --lambda
+  std::uint64_t seed = 1;        ///< --seed
+  int warmup_steps = 200;        ///< --warmup
+
+  // Outputs
+  bool write_videos = true;       ///< !--no-videos
+  bool write_point_cloud = true;  ///< !--no-ply
+
+  std::string gt;  ///< --gt: ground-truth folder to evaluate against
+
+  /// Called from the calling thread as the run advances. May throw to abort the run.
+  std::function<void(const PipelineProgress&)> progress;
+  /// When non-null and set to true (from any thread), the run stops at the next check and
+  /// Pipeline::run throws Error(ErrorCategory::cancelled). Outputs of finished stages stay cached
+  /// in `out`, so a rerun resumes.
+  const std::atomic<bool>* cancel = nullptr;
+};
+
+struct PipelineResult {
+  std::vector<std::string> frame_names;
+  std::vector<FrameCamera> cameras;   ///< per frame, poses in the depth maps' units
+  std::vector<DepthMap> depths;       ///< per frame, at the depth resolution
+  CameraIntrinsics depth_intrinsics;  ///< intrinsics of the depth maps' resolution
+  int num_pairs = 0, num_pairs_dropped = 0;
+  std::vector<double> epoch_losses;
+  double initial_loss = 0, final_loss = 0;
+  std::string metrics_json;   ///< evaluation (when gt was given), JSON text
+  std::string run_info_json;  ///< what OUT/run.json holds (OUT = PipelineOptions::out), JSON text
+};
+
+/// Runs the pipeline described by its options.
+class CVD_API Pipeline {
+ public:
+  explicit Pipeline(PipelineOptions options);
+  /// Runs (or resumes) the pipeline. Throws cvd::Error: invalid_argument for bad options, io for
+  /// unreadable input, external when COLMAP fails, cancelled when options.cancel was set.
+  PipelineResult run();
+  const PipelineOptions& options() const { return options_; }
+
+ private:
+  PipelineOptions options_;
+};
+
+}  // namespace v1
+}  // namespace cvd

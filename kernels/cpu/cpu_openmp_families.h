@@ -1,0 +1,16 @@
+// Per-family registration of the hand-written OpenMP f32 kernels; register_cpu_openmp_kernels
+// (register_cpu_openmp.cpp) calls them all.
+#pragma once
+#include "engine/dispatch.h"
+
+namespace cvd::cpu {
+
+void register_pointwise_kernels(KernelRegistry& r);    // cpu_pointwise.cpp
+void register_broadcast_kernels(KernelRegistry& r);    // cpu_broadcast.cpp
+void register_reduce_kernels(KernelRegistry& r);       // cpu_reduce.cpp
+void register_layout_kernels(KernelRegistry& r);       // cpu_layout.cpp
+void register_resize_kernels(KernelRegistry& r);       // cpu_resize.cpp
+void register_grid_sample_kernels(KernelRegistry& r);  // cpu_grid_sample.cpp
+void register_optimizer_kernels(KernelRegistry& r);    // cpu_optim.cpp
+
+}  // namespace cvd::cpu

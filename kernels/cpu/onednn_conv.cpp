@@ -1,0 +1,141 @@
+// conv2d, conv2d_backward_data and conv2d_backward_weight (with the bias gradient) on oneDNN
+// convolution primitives: NCHW caller tensors, PyTorch weight layout [O, C/g, KH, KW],
+// asymmetric padding, dilation and groups (incl. depthwise).
+#include <cstring>
+
+#include "engine/error.h"
+#include "kernels/cpu/depthwise_conv2d.h"
+#include "kernels/cpu/onednn_conv_family.h"
+#include "kernels/cpu/onednn_kernels.h"
+#include "kernels/kernel_params.h"
+
+namespace cvd::onednn {
+
+namespace {
+
+using tag = dnnl::memory::format_tag;
+
+void check_f32_4d(const Tensor& t, const char* what) {
+  if (t.dtype() != DType::f32 || t.dim() != 4 || !t.is_contiguous()) {
+    fail(ErrorCategory::internal,
+         "kernels/cpu/onednn_conv.cpp: {} must be a contiguous f32 4-d tensor, got {}", what,
+         t.str());
+  }
+}
+
+// x [N, C, H, W], w [O, C/g, KH, KW], y [N, O, OH, OW].
+ConvProblem conv_problem(const Shape& x, const Shape& w, const Shape& y, const Conv2dParams& p,
+                         bool bias) {
+  ConvProblem pr;
+  pr.src = {x[0], x[1], x[2], x[3]};
+  pr.dst = {y[0], y[1], y[2], y[3]};
+  pr.groups = p.groups;
+  if (p.groups == 1) {
+    pr.weights = {w[0], w[1], w[2], w[3]};
+    pr.weights_tag = tag::oihw;
+  } else {
+    pr.weights = {p.groups, w[0] / p.groups, w[1], w[2], w[3]};
+    pr.weights_tag = tag::goihw;
+  }
+  pr.strides = {p.stride_h, p.stride_w};
+  pr.dilates = {p.dilation_h - 1, p.dilation_w - 1};
+  pr.pad_l = {p.pad_top, p.pad_left};
+  pr.pad_r = {p.pad_bottom, p.pad_right};
+  pr.bias = bias;
+  return pr;
+}
+
+// The hand-written depthwise kernel's view of x [N, C, H, W] -> y [N, C, OH, OW], w [C, 1, KH, KW].
+cpu::DepthwiseGeometry depthwise_geometry(const Shape& x, const Shape& w, const Shape& y,
+                                          const Conv2dParams& p) {
+  cpu::DepthwiseGeometry g;
+  g.n = x[0], g.c = x[1], g.h = x[2], g.w = x[3], g.oh = y[2], g.ow = y[3];
+  g.kh = w[2], g.kw = w[3];
+  g.stride_h = p.stride_h, g.stride_w = p.stride_w, g.pad_top = p.pad_top, g.pad_left = p.pad_left;
+  g.dil_h = p.dilation_h, g.dil_w = p.dilation_w;
+  return g;
+}
+
+void zero_fill(const Tensor& t) {
+  if (t.defined() && t.numel() > 0) std::memset(t.data_ptr(), 0, t.nbytes());
+}
+
+// in {x, w, b?}, out {y}; Conv2dParams.
+void conv2d(const KernelArgs& a) {
+  const Tensor &x = a.in[0], &w = a.in[1], &b = a.in[2], &y = a.out[0];
+  check_f32_4d(x, "conv2d input");
+  check_f32_4d(w, "conv2d weight");
+  check_f32_4d(y, "conv2d output");
+  if (y.numel() == 0) return;
+  const ConvProblem pr = conv_problem(x.shape(), w.shape(), y.shape(), a.p<Conv2dParams>(),
+                                      b.defined());
+  if (use_depthwise_kernel(pr, ConvPass::forward)) {
+    cpu::depthwise_conv2d_forward(
+        depthwise_geometry(x.shape(), w.shape(), y.shape(), a.p<Conv2dParams>()), x.data<float>(),
+        w.data<float>(), b.defined() ? b.data<float>() : nullptr, y.data<float>());
+    return;
+  }
+  ChunkedPrimitive& plan = conv_pass_plan<ConvolutionFamily>(pr, ConvPass::forward);
+  if (b.defined()) {
+    plan.execute({x, w, b, y});
+  } else {
+    plan.execute({x, w, y});
+  }
+}
+
+// in {gy, w}, out {gx}; Conv2dParams.
+void conv2d_backward_data(const KernelArgs& a) {
+  const Tensor &gy = a.in[0], &w = a.in[1], &gx = a.out[0];
+  check_f32_4d(gy, "conv2d_backward_data output gradient");
+  check_f32_4d(w, "conv2d_backward_data weight");
+  check_f32_4d(gx, "conv2d_backward_data input gradient");
+  if (gx.numel() == 0) return;
+  const ConvProblem pr =
+      conv_problem(gx.shape(), w.shape(), gy.shape(), a.p<Conv2dParams>(), false);
+  if (use_depthwise_kernel(pr, ConvPass::backward_data)) {
+    cpu::depthwise_conv2d_backward_data(
+        depthwise_geometry(gx.shape(), w.shape(), gy.shape(), a.p<Conv2dParams>()),
+        gy.data<float>(), w.data<float>(), gx.data<float>());
+    return;
+  }
+  conv_pass_plan<ConvolutionFamily>(pr, ConvPass::backward_data).execute({gy, w, gx});
+}
+
+// in {gy, x}, out {gw, gb?}; Conv2dParams.
+void conv2d_backward_weight(const KernelArgs& a) {
+  const Tensor &gy = a.in[0], &x = a.in[1], &gw = a.out[0], &gb = a.out[1];
+  check_f32_4d(gy, "conv2d_backward_weight output gradient");
+  check_f32_4d(x, "conv2d_backward_weight input");
+  check_f32_4d(gw, "conv2d_backward_weight weight gradient");
+  if (x.shape()[0] == 0) {
+    zero_fill(gw);
+    zero_fill(gb);
+    return;
+  }
+  const ConvProblem pr =
+      conv_problem(x.shape(), gw.shape(), gy.shape(), a.p<Conv2dParams>(), gb.defined());
+  if (use_depthwise_kernel(pr, ConvPass::backward_weights)) {
+    cpu::depthwise_conv2d_backward_weight(
+        depthwise_geometry(x.shape(), gw.shape(), gy.shape(), a.p<Conv2dParams>()),
+        gy.data<float>(), x.data<float>(), gw.data<float>(),
+        gb.defined() ? gb.data<float>() : nullptr);
+    return;
+  }
+  ChunkedPrimitive& plan = conv_pass_plan<ConvolutionFamily>(pr, ConvPass::backward_weights);
+  if (gb.defined()) {
+    plan.execute({x, gy, gw, gb});
+  } else {
+    plan.execute({x, gy, gw});
+  }
+}
+
+}  // namespace
+
+void register_conv_kernels(KernelRegistry& r) {
+  r.add(OpId::conv2d, DeviceType::cpu, DType::f32, guarded<OpId::conv2d, conv2d>, "onednn");
+  r.add(OpId::conv2d_backward_data, DeviceType::cpu, DType::f32, guarded<OpId::conv2d_backward_data, conv2d_backward_data>, "onednn");
+  r.add(OpId::conv2d_backward_weight, DeviceType::cpu, DType::f32, guarded<OpId::conv2d_backward_weight, conv2d_backward_weight>,
+        "onednn");
+}
+
+}  // namespace cvd::onednn

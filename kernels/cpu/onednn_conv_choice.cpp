@@ -1,0 +1,60 @@
+// How a convolution pass runs: activation layout and batch chunking (see onednn_conv_family.h).
+#include <algorithm>
+#include <atomic>
+
+#include "kernels/cpu/onednn_conv_family.h"
+
+namespace cvd::onednn {
+
+namespace {
+
+std::atomic<int> g_layout_override{-1};
+std::atomic<size_t> g_chunk_budget_override{0};
+std::atomic<int> g_depthwise_override{-1};
+
+// Reordered activation bytes (input and output side) of one chunk above which the batch is split:
+// the chunk's blocked copies should still be in the (private + shared) caches when the primitive
+// and the reorder back read them.
+constexpr size_t kDefaultChunkBudget = size_t{8} << 20;
+
+int64_t volume(const dnnl::memory::dims& d, size_t from) {
+  int64_t v = 1;
+  for (size_t i = from; i < d.size(); ++i) v *= d[i];
+  return v;
+}
+
+}  // namespace
+
+void set_conv_layout_override(int layout) { g_layout_override = layout; }
+void set_conv_chunk_budget_override(size_t bytes) { g_chunk_budget_override = bytes; }
+void set_depthwise_kernel_override(int mode) { g_depthwise_override = mode; }
+
+bool use_depthwise_kernel(const ConvProblem& p, ConvPass /*pass*/) {
+  const bool depthwise = p.groups > 1 && p.groups == p.src[1] && p.groups == p.dst[1];
+  if (!depthwise) return false;
+  const int forced = g_depthwise_override.load();
+  return forced < 0 ? true : forced == 1;
+}
+
+ConvPlanChoice choose_conv_plan(const ConvProblem& p, ConvPass /*pass*/) {
+  ConvPlanChoice c;
+  const int forced = g_layout_override.load();
+  c.layout = forced >= 0 ? static_cast<ActivationLayout>(forced) : ActivationLayout::preferred;
+  if (c.layout == ActivationLayout::nchw) return c;
+
+  const int64_t n = std::max<int64_t>(p.src[0], 1);
+  const size_t per_image = static_cast<size_t>(volume(p.src, 1) + volume(p.dst, 1)) * sizeof(float);
+  const size_t budget =
+      g_chunk_budget_override.load() ? g_chunk_budget_override.load() : kDefaultChunkBudget;
+  // The fewest equal chunks whose reordered activations fit the budget.
+  c.chunks = n;
+  for (int64_t k = 1; k <= n; ++k) {
+    if (n % k == 0 && static_cast<size_t>(n / k) * per_image <= budget) {
+      c.chunks = k;
+      break;
+    }
+  }
+  return c;
+}
+
+}  // namespace cvd::onednn

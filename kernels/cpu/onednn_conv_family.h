@@ -1,0 +1,166 @@
+// The three passes (forward, backward data, backward weights) of a oneDNN convolution or
+// deconvolution on NCHW caller tensors, built once per shape and cached. Convolution
+// (onednn_conv.cpp) and transposed convolution (onednn_deconv.cpp) share this code: oneDNN gives
+// both families the same descriptor signatures.
+#pragma once
+#include <oneapi/dnnl/dnnl.hpp>
+
+#include <memory>
+#include <vector>
+
+#include "engine/tensor.h"
+#include "kernels/cpu/onednn_chunked_primitive.h"
+#include "kernels/cpu/onednn_context.h"
+
+namespace cvd::onednn {
+
+// One convolution-like problem in oneDNN terms. "src" is the input side of the forward pass and
+// "dst" its output side; weights are in oneDNN's logical order ({O, I, KH, KW}, or
+// {G, O/G, I/G, KH, KW} with groups) and stored in the caller's layout `weights_tag`.
+struct ConvProblem {
+  dnnl::memory::dims src, dst, weights;
+  dnnl::memory::format_tag weights_tag = dnnl::memory::format_tag::oihw;
+  dnnl::memory::dims strides, dilates, pad_l, pad_r;  // dilates in oneDNN's convention (d - 1)
+  bool bias = false;
+  int64_t groups = 1;
+};
+
+enum class ConvPass : int { forward, backward_data, backward_weights };
+
+// How the primitive sees activations: oneDNN's preferred layout (format_tag::any, usually blocked
+// nChw16c, reordered to and from NCHW) or the caller's NCHW as is (no reorders; oneDNN then
+// usually runs an im2col + GEMM implementation).
+enum class ActivationLayout : int { preferred, nchw };
+
+struct ConvPlanChoice {
+  ActivationLayout layout = ActivationLayout::preferred;
+  int64_t chunks = 1;  // the batch is run in this many equal chunks
+};
+
+// Per-pass choice of layout and batch chunking (onednn_conv_choice.cpp).
+ConvPlanChoice choose_conv_plan(const ConvProblem& p, ConvPass pass);
+
+// Whether a depthwise convolution (groups == in == out channels) runs the hand-written NCHW
+// kernel of cpu/depthwise_conv2d.h instead of a oneDNN primitive.
+bool use_depthwise_kernel(const ConvProblem& p, ConvPass pass);
+
+// Tuning overrides for tests and benchmarks: a forced layout (-1: automatic), the byte budget of
+// the reordered activations of one chunk (0: automatic), and the depthwise kernel choice
+// (-1: automatic, 0: never, 1: always).
+void set_conv_layout_override(int layout);
+void set_conv_chunk_budget_override(size_t bytes);
+void set_depthwise_kernel_override(int mode);
+
+struct ConvolutionFamily {
+  using forward = dnnl::convolution_forward;
+  using backward_data = dnnl::convolution_backward_data;
+  using backward_weights = dnnl::convolution_backward_weights;
+  static constexpr dnnl::algorithm algorithm = dnnl::algorithm::convolution_direct;
+  static constexpr int64_t id = 1;
+};
+
+struct DeconvolutionFamily {
+  using forward = dnnl::deconvolution_forward;
+  using backward_data = dnnl::deconvolution_backward_data;
+  using backward_weights = dnnl::deconvolution_backward_weights;
+  static constexpr dnnl::algorithm algorithm = dnnl::algorithm::deconvolution_direct;
+  static constexpr int64_t id = 2;
+};
+
+namespace detail {
+
+inline dnnl::memory::dims with_batch(dnnl::memory::dims d, int64_t n) {
+  d[0] = n;
+  return d;
+}
+
+inline dnnl::memory::desc f32_desc(const dnnl::memory::dims& d, dnnl::memory::format_tag t) {
+  return dnnl::memory::desc(d, dnnl::memory::data_type::f32, t);
+}
+
+// The forward primitive descriptor (also the hint of the backward passes).
+template <class Family>
+typename Family::forward::primitive_desc forward_pd(const ConvProblem& p,
+                                                    const dnnl::memory::desc& src,
+                                                    const dnnl::memory::desc& weights,
+                                                    const dnnl::memory::desc& dst) {
+  using tag = dnnl::memory::format_tag;
+  const dnnl::memory::desc bias =
+      p.bias ? f32_desc({p.dst[1]}, tag::x) : dnnl::memory::desc();
+  typename Family::forward::desc d(dnnl::prop_kind::forward_training, Family::algorithm, src,
+                                   weights, bias, dst, p.strides, p.dilates, p.pad_l, p.pad_r);
+  return typename Family::forward::primitive_desc(d, cpu_engine());
+}
+
+template <class Family>
+std::unique_ptr<ChunkedPrimitive> build_pass(const ConvProblem& p, ConvPass pass,
+                                             const ConvPlanChoice& choice) {
+  using tag = dnnl::memory::format_tag;
+  const int64_t nb = p.src[0] / choice.chunks;
+  const dnnl::memory::dims src_dims = with_batch(p.src, nb), dst_dims = with_batch(p.dst, nb);
+  const tag act = choice.layout == ActivationLayout::nchw ? tag::nchw : tag::any;
+  const dnnl::memory::desc src_req = f32_desc(src_dims, act), dst_req = f32_desc(dst_dims, act);
+  const dnnl::memory::desc weights_req = f32_desc(p.weights, tag::any);
+  const dnnl::memory::desc src_user = f32_desc(src_dims, tag::nchw);
+  const dnnl::memory::desc dst_user = f32_desc(dst_dims, tag::nchw);
+  const dnnl::memory::desc weights_user = f32_desc(p.weights, p.weights_tag);
+  const dnnl::memory::desc bias_user = f32_desc({p.dst[1]}, tag::x);
+
+  auto fwd = forward_pd<Family>(p, src_req, weights_req, dst_req);
+  std::vector<ArgSpec> args;
+  switch (pass) {
+    case ConvPass::forward: {
+      args.push_back({DNNL_ARG_SRC, ArgKind::batch_input, src_user, fwd.src_desc()});
+      args.push_back({DNNL_ARG_WEIGHTS, ArgKind::weight_input, weights_user, fwd.weights_desc()});
+      if (p.bias) args.push_back({DNNL_ARG_BIAS, ArgKind::plain_input, bias_user, bias_user});
+      args.push_back({DNNL_ARG_DST, ArgKind::batch_output, dst_user, fwd.dst_desc()});
+      return std::make_unique<ChunkedPrimitive>(typename Family::forward(fwd), std::move(args),
+                                                choice.chunks);
+    }
+    case ConvPass::backward_data: {
+      typename Family::backward_data::desc d(Family::algorithm, src_req, weights_req, dst_req,
+                                             p.strides, p.dilates, p.pad_l, p.pad_r);
+      typename Family::backward_data::primitive_desc pd(d, cpu_engine(), fwd);
+      args.push_back({DNNL_ARG_DIFF_DST, ArgKind::batch_input, dst_user, pd.diff_dst_desc()});
+      args.push_back({DNNL_ARG_WEIGHTS, ArgKind::weight_input, weights_user, pd.weights_desc()});
+      args.push_back({DNNL_ARG_DIFF_SRC, ArgKind::batch_output, src_user, pd.diff_src_desc()});
+      return std::make_unique<ChunkedPrimitive>(typename Family::backward_data(pd),
+                                                std::move(args), choice.chunks);
+    }
+    case ConvPass::backward_weights: {
+      const dnnl::memory::desc bias_req =
+          p.bias ? f32_desc({p.dst[1]}, tag::x) : dnnl::memory::desc();
+      typename Family::backward_weights::desc d(Family::algorithm, src_req, weights_req,
+                                                bias_req, dst_req, p.strides, p.dilates,
+                                                p.pad_l, p.pad_r);
+      typename Family::backward_weights::primitive_desc pd(d, cpu_engine(), fwd);
+      args.push_back({DNNL_ARG_SRC, ArgKind::batch_input, src_user, pd.src_desc()});
+      args.push_back({DNNL_ARG_DIFF_DST, ArgKind::batch_input, dst_user, pd.diff_dst_desc()});
+      args.push_back(
+          {DNNL_ARG_DIFF_WEIGHTS, ArgKind::sum_output, weights_user, pd.diff_weights_desc()});
+      if (p.bias) {
+        args.push_back({DNNL_ARG_DIFF_BIAS, ArgKind::sum_output, bias_user, pd.diff_bias_desc()});
+      }
+      return std::make_unique<ChunkedPrimitive>(typename Family::backward_weights(pd),
+                                                std::move(args), choice.chunks);
+    }
+  }
+  return nullptr;
+}
+
+}  // namespace detail
+
+// The cached plan of one pass of `p`.
+template <class Family>
+ChunkedPrimitive& conv_pass_plan(const ConvProblem& p, ConvPass pass) {
+  static PrimitiveCache<ChunkedPrimitive> cache;
+  const ConvPlanChoice choice = choose_conv_plan(p, pass);
+  CacheKey key;
+  key.add(Family::id).add(static_cast<int64_t>(pass)).add(onednn_threads());
+  key.add(p.src).add(p.dst).add(p.weights).add(static_cast<int64_t>(p.weights_tag));
+  key.add(p.strides).add(p.dilates).add(p.pad_l).add(p.pad_r).add(p.bias ? 1 : 0);
+  key.add(static_cast<int64_t>(choice.layout)).add(choice.chunks);
+  return cache.get(key, [&] { return detail::build_pass<Family>(p, pass, choice); });
+}
+
+}  // namespace cvd::onednn

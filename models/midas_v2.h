@@ -1,0 +1,50 @@
+// MiDaS v2 (Ranftl et al. 2020): MidasNet(features=256, non_negative=True) with a ResNeXt-101
+// 32x8d encoder and the RefineNet-style fusion decoder. Layer table: shared/MODELS.md.
+//
+// Input contract: RGB in [0, 1], [N, 3, H, W] with H and W multiples of 32; normalize_input
+// applies the ImageNet mean / std. Output: non-negative relative inverse depth [N, 1, H, W].
+// Parameter names follow the released state dict ("pretrained.layer3.12.conv2.weight",
+// "scratch.refinenet2.resConfUnit1.conv1.bias", ...). The released file also holds
+// scratch.refinenet4.resConfUnit1.* which the forward never uses: this model does not have it,
+// load with load_depth_net_state (models/midas_state.h) or drop those names.
+//
+// Width multiplier (tests): `width` must be a power of two in (0, 1]; every channel count c
+// becomes ceil(c * width) (at least 1) and the ResNeXt cardinality is min(32, ceil(256 * width)),
+// which divides every bottleneck width. The same rule is in tools/reference/midas_models.py.
+#pragma once
+#include "models/depth_net.h"
+
+namespace cvd {
+
+class Sequential;
+
+class MidasV2Net : public DepthNet {
+ public:
+  MidasV2Net(double width, Generator& gen);
+  ~MidasV2Net() override;
+  std::string arch() const override { return "midas_v2"; }
+  int alignment() const override { return 32; }
+  DepthOutputKind output_kind() const override { return DepthOutputKind::inverse_depth; }
+  Tensor normalize_input(const Tensor& rgb01) const override;
+  Tensor forward_raw(const Tensor& x) override;
+  Tensor output_bias() override;
+  // Execution order of the fusion decoder: layer4_rn, refinenet4 (resConfUnit1, resConfUnit2,
+  // out_conv), layer3_rn, refinenet3, ... (registration lists layer1_rn..layer4_rn first).
+  std::vector<std::string> execution_order() const override {
+    std::vector<std::string> order{"pretrained"};
+    for (int i = 4; i >= 1; --i) {
+      const std::string r = "scratch.refinenet" + std::to_string(i);
+      order.insert(order.end(), {"scratch.layer" + std::to_string(i) + "_rn", r + ".resConfUnit1",
+                                 r + ".resConfUnit2", r + ".out_conv"});
+    }
+    order.push_back("scratch.output_conv");
+    return order;
+  }
+  std::string type_name() const override { return "MidasNet"; }
+
+ private:
+  struct Parts;
+  std::unique_ptr<Parts> parts_;
+};
+
+}  // namespace cvd

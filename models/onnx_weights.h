@@ -1,0 +1,59 @@
+// Converts the weights of an ONNX graph (models/onnx_graph.h) into a DepthNet's parameters and
+// buffers. The graph is not executed: cvd runs its own implementation of the architecture, so the
+// converter only has to find, for every weight layer of the network, the graph's tensors.
+//
+// Weight layers of the graph, walked in topological order: Conv / ConvTranspose (weight, bias),
+// BatchNormalization (scale, B, mean, var), Gemm / MatMul (weight, bias). Each is matched to a
+// layer of the network (Conv2d, ConvTranspose2d, BatchNorm2d, Linear):
+//   1. by name: initializer names equal to the network's state names (torch.onnx.export keeps
+//      them with training=TrainingMode.TRAINING and do_constant_folding=False);
+//   2. by structure, for the rest: the i-th remaining graph layer is the i-th remaining network
+//      layer in execution order (DepthNet::execution_order).
+// Every shape, layer kind, BatchNorm epsilon and conv group / stride / dilation is checked. A
+// BatchNormalization whose scale / B are constants of 1 / 0 (PyTorch's export of affine=False)
+// matches a BatchNorm2d without affine parameters.
+//
+// A file that cannot be converted is refused with ONE Error that lists every unsupported op type
+// (with counts) and every unmatched or mismatched tensor.
+#pragma once
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "models/depth_net.h"
+#include "models/onnx_graph.h"
+
+namespace cvd {
+
+struct OnnxConversionReport {
+  size_t layers = 0;        // weight layers matched
+  size_t by_name = 0;       // layers matched by initializer names
+  size_t by_structure = 0;  // layers matched by graph position
+  size_t tensors = 0;       // tensors copied into the network
+  // Network tensors its forward never uses (DepthNet::execution_order), left as initialised.
+  std::vector<std::string> unused_in_forward;
+  std::vector<std::string> warnings;     // e.g. Resize modes that differ from the network's
+  std::map<std::string, int> op_counts;  // op type -> nodes
+};
+
+// The standard (default-domain) op types the converter accepts.
+const std::set<std::string>& onnx_supported_ops();
+
+// Copies the graph's weights into `net` (converting dtype). Throws Error(unsupported) when the
+// graph has unsupported ops, Error(format) when its weights do not match the network; the one
+// message names the file and lists every problem.
+OnnxConversionReport load_onnx_weights(const OnnxModel& model, DepthNet& net);
+
+struct OnnxConversion {
+  std::unique_ptr<DepthNet> net;
+  OnnxConversionReport report;
+};
+
+// Reads `onnx_path` and converts it into a new `arch` network of the given width.
+OnnxConversion convert_onnx(const std::filesystem::path& onnx_path, const std::string& arch,
+                            double width);
+
+}  // namespace cvd

@@ -1,0 +1,466 @@
+#include "pipeline/colmap_runner.h"
+
+#include <fcntl.h>
+#include <spawn.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <spdlog/spdlog.h>
+#include <algorithm>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <deque>
+#include <fstream>
+#include <map>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <set>
+
+#include "engine/error.h"
+
+extern char** environ;
+
+namespace cvd {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// Shell-style quoting, only for logging the command (nothing is ever run through a shell).
+std::string quoted(const std::string& s) {
+  if (!s.empty() && s.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ"
+                                        "0123456789-_./=,:+") == std::string::npos)
+    return s;
+  std::string out = "'";
+  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return out + "'";
+}
+
+// The last `n` lines of a text file (for error messages).
+std::string tail_lines(const fs::path& file, size_t n) {
+  std::ifstream in(file);
+  std::deque<std::string> lines;
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.empty()) continue;
+    lines.push_back(line);
+    if (lines.size() > n) lines.pop_front();
+  }
+  std::string out;
+  for (const auto& l : lines) out += "\n  | " + l;
+  return out;
+}
+
+struct CommandRun {
+  int exit_code = -1;
+  double seconds = 0;
+};
+
+// Runs `exe subcommand args...` without a shell, stdout and stderr appended to result.log_file,
+// stdin from /dev/null; the wall time is logged and appended to result.step_seconds.
+CommandRun run_logged(const fs::path& exe, const std::string& subcommand,
+                      const std::vector<std::string>& args, ColmapResult& result) {
+  const fs::path& log = result.log_file;
+  std::vector<std::string> argv_s = {exe.string(), subcommand};
+  argv_s.insert(argv_s.end(), args.begin(), args.end());
+  std::string printable;
+  for (const auto& a : argv_s) printable += (printable.empty() ? "" : " ") + quoted(a);
+  spdlog::info("colmap: running {}", printable);
+  {
+    std::ofstream l(log, std::ios::app);
+    l << "\n==== " << printable << "\n";
+  }
+  std::vector<char*> argv;
+  for (auto& a : argv_s) argv.push_back(a.data());
+  argv.push_back(nullptr);
+
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, STDIN_FILENO, "/dev/null", O_RDONLY, 0);
+  std::string log_s = log.string();
+  posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, log_s.c_str(),
+                                   O_WRONLY | O_CREAT | O_APPEND, 0644);
+  posix_spawn_file_actions_adddup2(&actions, STDOUT_FILENO, STDERR_FILENO);
+  auto t0 = Clock::now();
+  pid_t pid = 0;
+  int rc = posix_spawn(&pid, argv_s[0].c_str(), &actions, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  if (rc != 0) fail(ErrorCategory::external, "cannot start {}: {}", argv_s[0], std::strerror(rc));
+  int status = 0;
+  while (waitpid(pid, &status, 0) < 0) {
+    if (errno != EINTR) fail(ErrorCategory::external, "waitpid on colmap {} failed", subcommand);
+  }
+  CommandRun run;
+  run.seconds = seconds_since(t0);
+  run.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+  spdlog::info("colmap {}: exit code {}, {:.1f} s", subcommand, run.exit_code, run.seconds);
+  result.step_seconds.emplace_back(subcommand, run.seconds);
+  return run;
+}
+
+void require_success(const CommandRun& run, const std::string& subcommand, const fs::path& log) {
+  if (run.exit_code != 0)
+    fail(ErrorCategory::external,
+         "COLMAP {} failed with exit code {}; its log is {}; last lines:{}", subcommand,
+         run.exit_code, log.string(), tail_lines(log, 8));
+}
+
+std::string internal_name(size_t index) { return fmt::format("f{:06d}.png", index); }
+
+struct MapperAttempt {
+  ColmapModel model;  // largest model, internal names, COLMAP resolution
+  int num_models = 0;
+  bool mapper_ok = false;
+};
+
+// Runs mapper + model_converter into <work_dir>/colmap_sparse_<attempt>, reads every model back and
+// keeps the one with most images. Never throws on missing or unreadable COLMAP output.
+MapperAttempt map_and_read(const fs::path& exe, const fs::path& work_dir, int attempt,
+                           const std::vector<std::string>& mapper_args, ColmapResult& result) {
+  MapperAttempt out;
+  fs::path sparse = work_dir / fmt::format("colmap_sparse_{}", attempt);
+  fs::remove_all(sparse);
+  fs::create_directories(sparse);
+  std::vector<std::string> args = {"--database_path", (work_dir / "colmap.db").string(),
+                                   "--image_path",    (work_dir / "colmap_images").string(),
+                                   "--output_path",   sparse.string()};
+  args.insert(args.end(), mapper_args.begin(), mapper_args.end());
+  CommandRun run = run_logged(exe, "mapper", args, result);
+  out.mapper_ok = run.exit_code == 0;
+  if (!out.mapper_ok)
+    spdlog::warn("colmap mapper exited with code {} (usually: no initial pair / no model)",
+                 run.exit_code);
+
+  std::vector<fs::path> model_dirs;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(sparse, ec))
+    if (e.is_directory() && fs::exists(e.path() / "images.bin")) model_dirs.push_back(e.path());
+  std::sort(model_dirs.begin(), model_dirs.end());
+  for (const auto& dir : model_dirs) {
+    fs::path txt = work_dir / fmt::format("colmap_sparse_{}_txt", attempt) / dir.filename();
+    fs::create_directories(txt);
+    CommandRun conv = run_logged(
+        exe, "model_converter",
+        {"--input_path", dir.string(), "--output_path", txt.string(), "--output_type", "TXT"},
+        result);
+    if (conv.exit_code != 0) {
+      spdlog::warn("colmap model_converter failed on {} (exit code {}); model skipped",
+                   dir.string(), conv.exit_code);
+      continue;
+    }
+    try {
+      ColmapModel m = read_colmap_text_model(txt);
+      ++out.num_models;
+      if (m.images.size() > out.model.images.size()) out.model = std::move(m);
+    } catch (const Error& e) {
+      spdlog::warn("COLMAP model {} is unreadable, skipped: {}", txt.string(), e.what());
+    }
+  }
+  return out;
+}
+
+// Brings a model from COLMAP's copies (internal names, downscaled) back to the caller's frames.
+ColmapModel to_frame_space(const ColmapModel& m, const std::map<std::string, std::string>& names,
+                           int width, int height) {
+  ColmapModel out;
+  out.notes = m.notes;
+  out.points = m.points;
+  for (const auto& [id, cam] : m.cameras) {
+    Intrinsics k = cam.intrinsics().scaled_to(width, height);
+    out.cameras[id] = {id, "PINHOLE", width, height, {k.fx, k.fy, k.cx, k.cy}};
+  }
+  for (const auto& [internal, img] : m.images) {
+    auto it = names.find(internal);
+    if (it == names.end()) {
+      spdlog::warn("COLMAP model has an image '{}' that cvd did not write; ignored", internal);
+      continue;
+    }
+    ColmapImage copy = img;
+    copy.name = it->second;
+    const ColmapCamera& cam = m.cameras.at(img.camera_id);
+    double sx = double(width) / cam.width, sy = double(height) / cam.height;
+    for (auto& o : copy.observations) o.xy = Eigen::Vector2d(o.xy.x() * sx, o.xy.y() * sy);
+    out.images[copy.name] = std::move(copy);
+  }
+  return out;
+}
+
+}  // namespace
+
+std::filesystem::path find_executable(const std::string& program) {
+  auto executable = [](const fs::path& p) {
+    std::error_code ec;
+    return fs::is_regular_file(p, ec) && ::access(p.c_str(), X_OK) == 0;
+  };
+  if (program.empty()) return {};
+  if (program.find('/') != std::string::npos) return executable(program) ? fs::path(program) : "";
+  const char* path = std::getenv("PATH");
+  std::string dirs = path ? path : "/usr/local/bin:/usr/bin:/bin";
+  size_t start = 0;
+  while (start <= dirs.size()) {
+    size_t end = dirs.find(':', start);
+    if (end == std::string::npos) end = dirs.size();
+    std::string dir = dirs.substr(start, end - start);
+    fs::path candidate = fs::path(dir.empty() ? "." : dir) / program;
+    if (executable(candidate)) return candidate;
+    start = end + 1;
+  }
+  return {};
+}
+
+std::vector<ColmapFrame> load_colmap_frames(const std::vector<std::filesystem::path>& images) {
+  std::vector<ColmapFrame> frames;
+  for (const auto& p : images) {
+    ColmapFrame f;
+    f.name = p.filename().string();
+    f.image = cv::imread(p.string(), cv::IMREAD_COLOR);
+    if (f.image.empty()) fail(ErrorCategory::io, "cannot read image {}", p.string());
+    frames.push_back(std::move(f));
+  }
+  return frames;
+}
+
+ColmapResult run_colmap(const std::vector<ColmapFrame>& frames,
+                        const std::filesystem::path& work_dir, const ColmapOptions& options) {
+  const auto t_start = Clock::now();
+  const size_t n = frames.size();
+  CVD_CHECK(n >= 2, "run_colmap: needs at least 2 frames, got {}", n);
+  CVD_CHECK(options.max_num_features > 0, "run_colmap: max_num_features must be positive");
+  CVD_CHECK(options.sequential_overlap > 0, "run_colmap: sequential_overlap must be positive");
+  CVD_CHECK(options.init_min_tri_angle > 0 && options.relaxed_init_min_tri_angle > 0,
+            "run_colmap: initial triangulation angles must be positive");
+  CVD_CHECK(options.min_registered_fraction >= 0 && options.min_registered_fraction <= 1,
+            "run_colmap: min_registered_fraction must be in [0, 1], got {}",
+            options.min_registered_fraction);
+  const int width = frames[0].image.cols, height = frames[0].image.rows;
+  std::set<std::string> seen;
+  bool any_mask = false;
+  for (const auto& f : frames) {
+    CVD_CHECK(!f.name.empty(), "run_colmap: a frame has an empty name");
+    CVD_CHECK(seen.insert(f.name).second, "run_colmap: frame name '{}' appears twice", f.name);
+    CVD_CHECK(!f.image.empty() && f.image.depth() == CV_8U &&
+                  (f.image.channels() == 1 || f.image.channels() == 3),
+              "run_colmap: frame '{}' must be an 8-bit 1- or 3-channel image", f.name);
+    CVD_CHECK(f.image.cols == width && f.image.rows == height,
+              "run_colmap: frame '{}' is {}x{} but the first frame is {}x{} (one camera)", f.name,
+              f.image.cols, f.image.rows, width, height);
+    if (!f.mask.empty()) {
+      CVD_CHECK(f.mask.type() == CV_8UC1 && f.mask.size() == f.image.size(),
+                "run_colmap: mask of frame '{}' must be 8-bit single-channel {}x{}", f.name, width,
+                height);
+      any_mask = true;
+    }
+  }
+  if (options.intrinsics) validate_intrinsics(*options.intrinsics, "run_colmap intrinsics");
+
+  fs::path exe = find_executable(options.colmap_binary);
+  if (exe.empty())
+    fail(ErrorCategory::unsupported,
+         "colmap not found on PATH (looked for '{}'); install COLMAP 3.8 (Debian/Ubuntu: apt "
+         "install colmap) or give the poses and intrinsics yourself (TUM, KITTI or COLMAP text)",
+         options.colmap_binary);
+
+  // Fresh work directory content (only what this stage owns).
+  fs::create_directories(work_dir);
+  for (const char* owned : {"colmap_images", "colmap_masks", "colmap.db", "colmap.db-shm",
+                            "colmap.db-wal", "colmap_sparse_0", "colmap_sparse_1",
+                            "colmap_sparse_0_txt", "colmap_sparse_1_txt", "colmap_model_txt"})
+    fs::remove_all(work_dir / owned);
+  ColmapResult result;
+  result.log_file = work_dir / "colmap.log";
+  { std::ofstream truncate(result.log_file, std::ios::trunc); }
+
+  // 1. Downscaled copies under internal names.
+  double s = 1.0;
+  if (options.max_image_size > 0 && std::max(width, height) > options.max_image_size)
+    s = double(options.max_image_size) / std::max(width, height);
+  const int cw = std::max(1, int(std::lround(width * s)));
+  const int ch = std::max(1, int(std::lround(height * s)));
+  fs::create_directories(work_dir / "colmap_images");
+  if (any_mask) fs::create_directories(work_dir / "colmap_masks");
+  std::map<std::string, std::string> user_name;  // internal -> user
+  const std::vector<int> png = {cv::IMWRITE_PNG_COMPRESSION, 1};
+  for (size_t i = 0; i < n; ++i) {
+    std::string name = internal_name(i);
+    user_name[name] = frames[i].name;
+    cv::Mat img = frames[i].image;
+    if (cw != width || ch != height) cv::resize(img, img, {cw, ch}, 0, 0, cv::INTER_AREA);
+    if (!cv::imwrite((work_dir / "colmap_images" / name).string(), img, png))
+      fail(ErrorCategory::io, "cannot write {}", (work_dir / "colmap_images" / name).string());
+    // COLMAP reads the mask of image X from <mask_path>/X.png; a frame without a mask gets an
+    // all-valid one.
+    if (any_mask) {
+      cv::Mat m =
+          frames[i].mask.empty() ? cv::Mat(ch, cw, CV_8UC1, cv::Scalar(255)) : frames[i].mask;
+      if (m.cols != cw || m.rows != ch) cv::resize(m, m, {cw, ch}, 0, 0, cv::INTER_NEAREST);
+      if (!cv::imwrite((work_dir / "colmap_masks" / (name + ".png")).string(), m, png))
+        fail(ErrorCategory::io, "cannot write mask for {}", frames[i].name);
+    }
+  }
+  spdlog::info("colmap: {} frames of {}x{} written as {}x{} to {}", n, width, height, cw, ch,
+               (work_dir / "colmap_images").string());
+
+  const std::string threads = std::to_string(options.num_threads);
+  const std::string db = (work_dir / "colmap.db").string();
+
+  // 2. Features.
+  std::vector<std::string> fe = {"--database_path",
+                                 db,
+                                 "--image_path",
+                                 (work_dir / "colmap_images").string(),
+                                 "--ImageReader.single_camera",
+                                 "1",
+                                 "--SiftExtraction.use_gpu",
+                                 "0",
+                                 "--SiftExtraction.num_threads",
+                                 threads,
+                                 "--SiftExtraction.max_num_features",
+                                 std::to_string(options.max_num_features),
+                                 "--SiftExtraction.max_image_size",
+                                 std::to_string(std::max(cw, ch))};
+  if (options.intrinsics) {
+    // scaled_to rescales from the resolution the intrinsics were given for.
+    Intrinsics k = options.intrinsics->scaled_to(cw, ch);
+    if (std::abs(k.fx - k.fy) <= 1e-3 * k.fx) {
+      fe.insert(fe.end(),
+                {"--ImageReader.camera_model", "SIMPLE_PINHOLE", "--ImageReader.camera_params",
+                 fmt::format("{:.6f},{:.6f},{:.6f}", 0.5 * (k.fx + k.fy), k.cx, k.cy)});
+    } else {
+      fe.insert(fe.end(), {"--ImageReader.camera_model", "PINHOLE", "--ImageReader.camera_params",
+                           fmt::format("{:.6f},{:.6f},{:.6f},{:.6f}", k.fx, k.fy, k.cx, k.cy)});
+    }
+  } else {
+    fe.insert(fe.end(), {"--ImageReader.camera_model", "SIMPLE_PINHOLE"});
+  }
+  if (any_mask)
+    fe.insert(fe.end(), {"--ImageReader.mask_path", (work_dir / "colmap_masks").string()});
+  require_success(run_logged(exe, "feature_extractor", fe, result), "feature_extractor",
+                  result.log_file);
+
+  // 3. Matches.
+  std::vector<std::string> ma = {"--database_path",
+                                 db,
+                                 "--SiftMatching.use_gpu",
+                                 "0",
+                                 "--SiftMatching.num_threads",
+                                 threads,
+                                 "--SiftMatching.guided_matching",
+                                 options.guided_matching ? "1" : "0"};
+  std::string matcher = "exhaustive_matcher";
+  if (options.matcher == ColmapMatcher::sequential) {
+    matcher = "sequential_matcher";
+    ma.insert(ma.end(), {"--SequentialMatching.overlap", std::to_string(options.sequential_overlap),
+                         "--SequentialMatching.loop_detection", "0"});
+  }
+  require_success(run_logged(exe, matcher, ma, result), matcher, result.log_file);
+
+  // 4. Mapper, with one relaxed retry.
+  const int required =
+      std::min<int>(int(n), std::max<int>(options.min_registered_frames,
+                                          int(std::ceil(options.min_registered_fraction * n))));
+  auto mapper_args = [&](bool relaxed) {
+    std::vector<std::string> a = {"--Mapper.num_threads",
+                                  threads,
+                                  "--Mapper.min_model_size",
+                                  std::to_string(std::min<int>(int(n), 3)),
+                                  "--Mapper.init_min_tri_angle",
+                                  fmt::format("{}", relaxed ? options.relaxed_init_min_tri_angle
+                                                            : options.init_min_tri_angle)};
+    if (options.intrinsics)
+      a.insert(a.end(),
+               {"--Mapper.ba_refine_focal_length", "0", "--Mapper.ba_refine_principal_point", "0",
+                "--Mapper.ba_refine_extra_params", "0"});
+    if (relaxed)
+      a.insert(a.end(),
+               {"--Mapper.init_min_num_inliers", "50", "--Mapper.init_max_forward_motion", "0.99",
+                "--Mapper.abs_pose_min_num_inliers", "15", "--Mapper.abs_pose_min_inlier_ratio",
+                "0.15", "--Mapper.min_num_matches", "10", "--Mapper.init_max_error", "6"});
+    return a;
+  };
+  MapperAttempt best;
+  int best_attempt = 0;
+  const int max_attempts = options.retry_relaxed ? 2 : 1;
+  for (int attempt = 0; attempt < max_attempts; ++attempt) {
+    MapperAttempt a = map_and_read(exe, work_dir, attempt, mapper_args(attempt > 0), result);
+    result.attempts = attempt + 1;
+    spdlog::info("colmap mapper attempt {}{}: {} model(s), largest registers {} of {} frames",
+                 attempt + 1, attempt > 0 ? " (relaxed)" : "", a.num_models, a.model.images.size(),
+                 n);
+    if (a.model.images.size() > best.model.images.size() || attempt == 0) {
+      best = std::move(a);
+      best_attempt = attempt;
+    }
+    if (int(best.model.images.size()) >= required) break;
+    if (attempt + 1 < max_attempts)
+      spdlog::warn("colmap registered {} of {} frames (need {}); retrying with relaxed settings",
+                   best.model.images.size(), n, required);
+  }
+  spdlog::info("colmap: using attempt {}", best_attempt + 1);
+  result.num_models = best.num_models;
+
+  const int registered = int(best.model.images.size());
+  if (registered == 0)
+    fail(ErrorCategory::external,
+         "COLMAP built no model from {} frames after {} attempt(s) (usually too little parallax or "
+         "texture, or wrong intrinsics); see {}; last lines:{}",
+         n, result.attempts, result.log_file.string(), tail_lines(result.log_file, 6));
+
+  // 5. Back to the caller's names and resolution.
+  result.model = to_frame_space(best.model, user_name, width, height);
+  for (const auto& f : frames) {
+    FrameCamera c = result.model.frame_camera(f.name);
+    if (!c.registered) result.unregistered.push_back(f.name);
+    result.cameras.push_back(c);
+  }
+  if (registered < required) {
+    std::string names;
+    for (size_t i = 0; i < result.unregistered.size() && i < 20; ++i)
+      names += (i ? ", " : "") + result.unregistered[i];
+    if (result.unregistered.size() > 20)
+      names += fmt::format(", ... ({} more)", result.unregistered.size() - 20);
+    fail(ErrorCategory::external,
+         "COLMAP registered only {} of {} frames (at least {} required) in the largest of {} "
+         "model(s); unregistered: {}; see {}",
+         registered, n, required, result.num_models, names, result.log_file.string());
+  }
+  if (!result.unregistered.empty()) {
+    std::string names;
+    for (const auto& u : result.unregistered) names += (names.empty() ? "" : ", ") + u;
+    spdlog::warn("colmap: {} of {} frames not registered: {}", result.unregistered.size(), n,
+                 names);
+  }
+  if (result.num_models > 1)
+    spdlog::warn("colmap split the clip into {} models; using the largest ({} frames)",
+                 result.num_models, registered);
+  if (!options.intrinsics) {
+    for (const auto& [id, cam] : result.model.cameras) {
+      double fov = cam.intrinsics().fov_x_deg();
+      if (fov < 20.0 || fov > 130.0) {
+        std::string w = fmt::format(
+            "COLMAP estimated fx = {:.1f} px for width {} (horizontal field of view {:.1f} "
+            "degrees), which is implausible; give the intrinsics if they are known",
+            cam.intrinsics().fx, cam.width, fov);
+        spdlog::warn("{}", w);
+        result.warnings.push_back(w);
+      }
+    }
+  }
+  try {
+    write_colmap_text_model(work_dir / "colmap_model_txt", result.model);
+  } catch (const Error& e) {
+    spdlog::warn("could not save the COLMAP model copy: {}", e.what());
+  }
+  result.seconds = seconds_since(t_start);
+  spdlog::info("colmap: registered {} of {} frames in {:.1f} s", registered, n, result.seconds);
+  return result;
+}
+
+}  // namespace cvd

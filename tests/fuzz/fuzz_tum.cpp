@@ -1,0 +1,9 @@
+// libFuzzer target: the TUM trajectory reader (pipeline/trajectory_io.cpp).
+#include "pipeline/trajectory_io.h"
+#include "tests/fuzz/fuzz_support.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  auto p = cvd::fuzz::input_file(data, size, "poses.txt");
+  cvd::fuzz::expect_only_cvd_errors([&] { cvd::read_tum_trajectory(p); });
+  return 0;
+}

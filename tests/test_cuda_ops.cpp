@@ -1,0 +1,164 @@
+// The CUDA backend on a real device, and its registration everywhere:
+//  - CudaOpTable: every case of the op table (tests/op_case_table.cpp) with f32 inputs on the
+//    CUDA device, forward and autograd backward, against the float64 reference on the CPU
+//    (same tolerances as tests/test_ops.cpp: f32_tol * max(1, |ref|max), 4x for gradients).
+//    Skipped, with the runtime's reason, when no GPU is usable.
+//  - CudaCoverage: in a CUDA build every op with a CPU f32 kernel has a CUDA f32 kernel; without
+//    a GPU, asking for CUDA memory is a clear Error while CPU work continues.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "engine/autograd.h"
+#include "engine/backend_info.h"
+#include "engine/dispatch.h"
+#include "engine/random.h"
+#include "tests/op_case_table.h"
+
+namespace cvd::test {
+namespace {
+
+Tensor make_input(const InputSpec& s, Generator& g) {
+  std::vector<double> v(shape_numel(s.shape));
+  for (auto& x : v) {
+    switch (s.init) {
+      case Init::normal:
+        x = g.normal();
+        break;
+      case Init::positive:
+        x = 0.5 + 1.5 * g.uniform();
+        break;
+      case Init::away_from_zero:
+        x = (0.2 + g.uniform()) * (g.uniform() < 0.5 ? -1 : 1);
+        break;
+      case Init::grid:
+        x = -1.1 + 2.2 * g.uniform();
+        break;
+      case Init::mask:
+        x = g.uniform() < 0.5 ? 0.0 : 1.0;
+        break;
+    }
+  }
+  return Tensor::from_vector(v, s.shape, DType::f64);
+}
+
+double max_abs(const std::vector<double>& v) {
+  double m = 0;
+  for (double x : v) m = std::max(m, std::abs(x));
+  return m;
+}
+
+class CudaOpTable : public ::testing::TestWithParam<OpCase> {};
+
+TEST_P(CudaOpTable, F32OnCudaVsReference) {
+  if (cuda_device_count() == 0) GTEST_SKIP() << "no CUDA device: " << cuda_runtime_status();
+  const OpCase& c = GetParam();
+  Generator g(99);
+  std::vector<Tensor> in64, in_cuda;
+  for (const auto& s : c.inputs) {
+    Tensor t = make_input(s, g);
+    Tensor u = t.to(DType::f32).to(Device::cuda());
+    if (s.differentiable) {
+      t.requires_grad_(true);
+      u.requires_grad_(true);
+    }
+    in64.push_back(t);
+    in_cuda.push_back(u);
+  }
+  Tensor out64 = c.fn(in64);
+  Tensor out_cuda = c.fn(in_cuda);
+  ASSERT_EQ(out_cuda.dtype(), DType::f32);
+  ASSERT_TRUE(out_cuda.device().is_cuda()) << c.name << " produced " << out_cuda.str();
+  ASSERT_EQ(out_cuda.shape(), out64.shape());
+  const std::vector<double> r = out64.to_vector(), f = out_cuda.to_vector();
+  const double scale = std::max(1.0, max_abs(r));
+  for (size_t k = 0; k < r.size(); ++k)
+    ASSERT_NEAR(f[k], r[k], c.f32_tol * scale) << c.name << ": output element " << k;
+
+  const Tensor weights = Tensor::randn(out64.shape(), g, DType::f64);
+  std::vector<Tensor> d64, d_cuda;
+  for (size_t i = 0; i < in64.size(); ++i)
+    if (in64[i].requires_grad()) {
+      d64.push_back(in64[i]);
+      d_cuda.push_back(in_cuda[i]);
+    }
+  const std::vector<Tensor> g64 = grad(sum(mul(out64, weights)), d64);
+  const std::vector<Tensor> g_cuda =
+      grad(sum(mul(out_cuda, weights.to(DType::f32).to(Device::cuda()))), d_cuda);
+  for (size_t i = 0; i < g64.size(); ++i) {
+    const std::vector<double> a = g64[i].to_vector(), b = g_cuda[i].to_vector();
+    const double gs = std::max(1.0, max_abs(a));
+    for (size_t k = 0; k < a.size(); ++k)
+      ASSERT_NEAR(b[k], a[k], c.f32_tol * 4 * gs)
+          << c.name << ": gradient of input " << i << " element " << k;
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Ops, CudaOpTable, ::testing::ValuesIn(all_op_cases()),
+                         [](const ::testing::TestParamInfo<OpCase>& i) { return i.param.name; });
+
+TEST(CudaOps, MatmulShapesOnDevice) {
+  if (cuda_device_count() == 0) GTEST_SKIP() << "no CUDA device: " << cuda_runtime_status();
+  Generator g(5);
+  for (bool ta : {false, true}) {
+    for (bool tb : {false, true}) {
+      const int64_t b = 3, m = 17, k = 33, n = 9;
+      const Tensor a64 = Tensor::randn(ta ? Shape{b, k, m} : Shape{b, m, k}, g, DType::f64);
+      const Tensor b64 = Tensor::randn(tb ? Shape{1, n, k} : Shape{1, k, n}, g, DType::f64);
+      const MatmulParams p{ta, tb};
+      const Tensor c64 = Tensor::empty({b, m, n}, DType::f64);
+      dispatch(OpId::matmul, a64, KernelArgs{{a64, b64}, {c64}, &p});
+      const Tensor ad = a64.to(DType::f32).to(Device::cuda());
+      const Tensor bd = b64.to(DType::f32).to(Device::cuda());
+      const Tensor cd = Tensor::empty({b, m, n}, DType::f32, Device::cuda());
+      dispatch(OpId::matmul, ad, KernelArgs{{ad, bd}, {cd}, &p});
+      const std::vector<double> r = c64.to_vector(), f = cd.to_vector();
+      const double scale = std::max(1.0, max_abs(r));
+      for (size_t i = 0; i < r.size(); ++i)
+        ASSERT_NEAR(f[i], r[i], 1e-5 * scale) << "trans_a " << ta << " trans_b " << tb;
+    }
+  }
+}
+
+TEST(CudaCoverage, EveryCpuOpHasCudaKernelInCudaBuilds) {
+  const KernelRegistry& r = kernel_registry();
+#ifdef CVD_WITH_CUDA
+  int missing = 0;
+  for (int i = 0; i < kNumOps; ++i) {
+    const OpId op = static_cast<OpId>(i);
+    if (!r.has(op, DeviceType::cpu, DType::f32)) continue;
+    EXPECT_TRUE(r.has(op, DeviceType::cuda, DType::f32))
+        << "no CUDA f32 kernel for " << op_name(op);
+    missing += r.has(op, DeviceType::cuda, DType::f32) ? 0 : 1;
+  }
+  EXPECT_EQ(missing, 0);
+  const std::vector<std::string> backends = compiled_backends();
+  EXPECT_TRUE(std::any_of(backends.begin(), backends.end(),
+                          [](const std::string& b) { return b.rfind("cuda", 0) == 0; }));
+#else
+  for (int i = 0; i < kNumOps; ++i)
+    EXPECT_FALSE(r.has(static_cast<OpId>(i), DeviceType::cuda, DType::f32))
+        << "CUDA kernel registered in a build without CUDA: " << op_name(static_cast<OpId>(i));
+  EXPECT_EQ(cuda_device_count(), 0);
+#endif
+}
+
+TEST(CudaCoverage, NoGpuIsAClearErrorAndCpuWorkContinues) {
+  if (cuda_device_count() > 0)
+    GTEST_SKIP() << "a CUDA device is present: " << cuda_runtime_status();
+  EXPECT_FALSE(cuda_runtime_status().empty());
+  const Tensor x = Tensor::ones({2, 3});
+  try {
+    (void)x.to(Device::cuda());
+    ADD_FAILURE() << "copying to CUDA without a GPU did not throw";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("CUDA"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW((void)Tensor::zeros({4}, DType::f32, Device::cuda()), Error);
+  const Tensor y = x + x;  // the CPU keeps working
+  EXPECT_EQ(y.to_vector(), std::vector<double>(6, 2.0));
+}
+
+}  // namespace
+}  // namespace cvd::test

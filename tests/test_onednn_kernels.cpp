@@ -1,0 +1,528 @@
+// The oneDNN-backed f32 CPU kernels (kernels/cpu/onednn_*, impl "onednn") against the float64
+// reference kernels (kernels/reference), both called through the dispatch registry on the same
+// inputs. Inputs are rounded to f32 first, so both kernels see identical numbers and only the
+// arithmetic differs. Outputs are pre-filled with NaN, so an element a kernel forgets to write
+// fails.
+//
+// Tolerances, as max |ours - ref| <= tol * max(max |ref|, 1e-3) over each output:
+//   conv / deconv forward and backward data, batch norm, matmul: 1e-4;
+//   conv / deconv backward weight and bias (sums over N * OH * OW products): 1e-4 scaled by
+//     sqrt(max(1, reduction / 256)) (the random-walk growth of f32 rounding in long sums);
+//   pooling: 1e-5 (max pooling is exact; averages are short sums).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "engine/dispatch.h"
+#include "engine/random.h"
+#include "engine/tensor.h"
+#include "kernels/cpu/onednn_context.h"
+#include "kernels/cpu/onednn_conv_family.h"
+#include "kernels/kernel_params.h"
+
+namespace cvd {
+namespace {
+
+// One tensor twice: f64 for the reference kernel, f32 for ours, equal values.
+struct Pair {
+  Tensor t64, t32;
+};
+
+Pair make_pair(std::vector<double> values, const Shape& shape) {
+  for (double& v : values) v = static_cast<double>(static_cast<float>(v));
+  return {Tensor::from_vector(values, shape, DType::f64),
+          Tensor::from_vector(values, shape, DType::f32)};
+}
+
+Pair normal(const Shape& shape, Generator& gen, double std = 1.0, double mean = 0.0) {
+  std::vector<double> v(static_cast<size_t>(shape_numel(shape)));
+  for (double& x : v) x = mean + std * gen.normal();
+  return make_pair(v, shape);
+}
+
+Pair uniform(const Shape& shape, Generator& gen, double lo, double hi) {
+  std::vector<double> v(static_cast<size_t>(shape_numel(shape)));
+  for (double& x : v) x = lo + (hi - lo) * gen.uniform();
+  return make_pair(v, shape);
+}
+
+// Outputs, pre-filled with NaN.
+Pair outputs(const Shape& shape) {
+  return make_pair(std::vector<double>(static_cast<size_t>(shape_numel(shape)),
+                                       std::numeric_limits<double>::quiet_NaN()),
+                   shape);
+}
+
+Pair none() { return {}; }
+
+
+const KernelInfo& kernel(OpId op, DType dt) {
+  const KernelInfo* k = kernel_registry().find(op, DeviceType::cpu, dt);
+  if (k == nullptr) throw std::runtime_error(std::string("no kernel for ") + op_name(op));
+  return *k;
+}
+
+// Runs (op, cpu, f64) and (op, cpu, f32) on the two halves of the pairs.
+void run_both(OpId op, const std::vector<Pair>& in, const std::vector<Pair>& out,
+              const void* params) {
+  const KernelInfo& ours = kernel(op, DType::f32);
+  ASSERT_STREQ(ours.impl, "onednn") << op_name(op);
+  KernelArgs a64, a32;
+  for (const Pair& p : in) a64.in.push_back(p.t64), a32.in.push_back(p.t32);
+  for (const Pair& p : out) a64.out.push_back(p.t64), a32.out.push_back(p.t32);
+  a64.params = a32.params = params;
+  kernel(op, DType::f64).fn(a64);
+  ours.fn(a32);
+}
+
+void expect_close(const Pair& p, double tol, const std::string& what) {
+  ASSERT_TRUE(p.t32.defined()) << what;
+  const std::vector<double> ref = p.t64.to_vector();
+  const std::vector<double> got = p.t32.to_vector();
+  ASSERT_EQ(ref.size(), got.size()) << what;
+  double scale = 1e-3, worst = 0.0;
+  size_t worst_at = 0;
+  for (double r : ref) scale = std::max(scale, std::abs(r));
+  for (size_t i = 0; i < ref.size(); ++i) {
+    const double err = std::isnan(got[i]) ? std::numeric_limits<double>::infinity()
+                                          : std::abs(got[i] - ref[i]);
+    if (err > worst) worst = err, worst_at = i;
+  }
+  EXPECT_LE(worst, tol * scale) << what << ": worst element " << worst_at << " got "
+                                << got[worst_at] << " want " << ref[worst_at] << " (scale "
+                                << scale << ")";
+}
+
+double sum_tolerance(int64_t reduction) {
+  return 1e-4 * std::sqrt(std::max(1.0, static_cast<double>(reduction) / 256.0));
+}
+
+// ---- Convolution -----------------------------------------------------------------------------
+
+struct ConvCase {
+  const char* name;
+  int64_t n, c, h, w, o, kh, kw;
+  Conv2dParams p;
+  bool bias;
+};
+
+Conv2dParams conv_params(int s, int pt, int pb, int pl, int pr, int d = 1, int g = 1) {
+  Conv2dParams p;
+  p.stride_h = p.stride_w = s;
+  p.pad_top = pt, p.pad_bottom = pb, p.pad_left = pl, p.pad_right = pr;
+  p.dilation_h = p.dilation_w = d;
+  p.groups = g;
+  return p;
+}
+
+int64_t conv_out(int64_t in, int64_t k, int s, int pb, int pa, int d) {
+  return (in + pb + pa - d * (k - 1) - 1) / s + 1;
+}
+
+const std::vector<ConvCase>& conv_cases() {
+  static const std::vector<ConvCase> cases = {
+      {"3x3 s1 p1 bias", 2, 3, 7, 9, 5, 3, 3, conv_params(1, 1, 1, 1, 1), true},
+      {"3x3 s1 p1 no bias", 2, 3, 7, 9, 5, 3, 3, conv_params(1, 1, 1, 1, 1), false},
+      {"1x1 image 1x1 kernel", 2, 4, 1, 1, 3, 1, 1, conv_params(1, 0, 0, 0, 0), true},
+      {"1x1 image 3x3 p1", 3, 4, 1, 1, 6, 3, 3, conv_params(1, 1, 1, 1, 1), true},
+      {"TF-SAME k3 s2 pads 0/1", 2, 5, 8, 9, 7, 3, 3, conv_params(2, 0, 1, 0, 1), true},
+      {"TF-SAME k5 s2 pads 1/2", 2, 3, 9, 10, 4, 5, 5, conv_params(2, 1, 2, 1, 2), false},
+      {"stride 3", 1, 3, 11, 13, 4, 3, 3, conv_params(3, 1, 1, 1, 1), true},
+      {"dilation 2", 2, 3, 9, 8, 5, 3, 3, conv_params(1, 2, 2, 2, 2, 2), true},
+      {"dilation 2 stride 2 asym", 1, 4, 10, 11, 3, 3, 3, conv_params(2, 1, 2, 2, 1, 2), false},
+      {"even kernel 2x2 no pad", 2, 3, 5, 7, 4, 2, 2, conv_params(1, 0, 0, 0, 0), true},
+      {"rect kernel 1x5", 2, 3, 6, 9, 4, 1, 5, conv_params(1, 0, 0, 2, 2), true},
+      {"groups 2", 2, 4, 6, 7, 6, 3, 3, conv_params(1, 1, 1, 1, 1, 1, 2), true},
+      {"groups 2 stride 2", 1, 6, 9, 9, 4, 3, 3, conv_params(2, 1, 1, 1, 1, 1, 2), false},
+      {"depthwise 3x3", 2, 8, 7, 6, 8, 3, 3, conv_params(1, 1, 1, 1, 1, 1, 8), true},
+      {"depthwise 5x5 s1", 2, 16, 9, 11, 16, 5, 5, conv_params(1, 2, 2, 2, 2, 1, 16), true},
+      {"depthwise 5x5 TF-SAME s2", 2, 32, 10, 9, 32, 5, 5, conv_params(2, 1, 2, 1, 2, 1, 32),
+       false},
+      {"depthwise 5x5 odd channels", 1, 20, 7, 8, 20, 5, 5, conv_params(1, 2, 2, 2, 2, 1, 20),
+       true},
+      {"depthwise 3x3 s3 dilation 2 asym", 2, 12, 11, 13, 12, 3, 3,
+       conv_params(3, 2, 1, 1, 3, 2, 12), true},
+      {"depthwise 5x5 image smaller than kernel", 2, 16, 2, 3, 16, 5, 5,
+       conv_params(1, 2, 2, 2, 2, 1, 16), true},
+      {"depthwise 1x1 image", 1, 16, 1, 1, 16, 3, 3, conv_params(1, 1, 1, 1, 1, 1, 16), false},
+      {"depthwise 7x7 s2 pads 3/2", 1, 16, 12, 15, 16, 7, 7, conv_params(2, 3, 2, 3, 2, 1, 16),
+       true},
+      {"depthwise 4x4 s2 pads 1/2", 2, 16, 9, 10, 16, 4, 4, conv_params(2, 1, 2, 1, 2, 1, 16),
+       false},
+      {"depthwise multiplier 2", 2, 4, 6, 5, 8, 3, 3, conv_params(1, 1, 1, 1, 1, 1, 4), true},
+      {"blocked channels 32->48", 2, 32, 12, 10, 48, 3, 3, conv_params(1, 1, 1, 1, 1), true},
+      {"channels 20->24 7x7", 2, 20, 11, 9, 24, 7, 7, conv_params(1, 3, 3, 3, 3), true},
+      {"1x1 expansion 24->96", 3, 24, 5, 6, 96, 1, 1, conv_params(1, 0, 0, 0, 0), false},
+      {"11x11 s1 p5", 1, 16, 13, 12, 16, 11, 11, conv_params(1, 5, 5, 5, 5), true},
+  };
+  return cases;
+}
+
+void check_conv_case(const ConvCase& cc) {
+  SCOPED_TRACE(cc.name);
+  Generator gen(17);
+  const Conv2dParams& p = cc.p;
+  const int64_t oh = conv_out(cc.h, cc.kh, p.stride_h, p.pad_top, p.pad_bottom, p.dilation_h);
+  const int64_t ow = conv_out(cc.w, cc.kw, p.stride_w, p.pad_left, p.pad_right, p.dilation_w);
+  const Shape xs = {cc.n, cc.c, cc.h, cc.w}, ws = {cc.o, cc.c / p.groups, cc.kh, cc.kw};
+  const Shape ys = {cc.n, cc.o, oh, ow};
+  Pair x = normal(xs, gen), w = normal(ws, gen, 0.5), b = cc.bias ? normal({cc.o}, gen) : none();
+  Pair gy = normal(ys, gen);
+
+  Pair y = outputs(ys);
+  run_both(OpId::conv2d, {x, w, b}, {y}, &p);
+  expect_close(y, 1e-4, "conv2d forward");
+
+  Pair gx = outputs(xs);
+  run_both(OpId::conv2d_backward_data, {gy, w}, {gx}, &p);
+  expect_close(gx, 1e-4, "conv2d backward data");
+
+  const double tol = sum_tolerance(cc.n * oh * ow);
+  for (bool with_gb : {true, false}) {
+    Pair gw = outputs(ws), gb = with_gb ? outputs({cc.o}) : none();
+    run_both(OpId::conv2d_backward_weight, {gy, x}, {gw, gb}, &p);
+    expect_close(gw, tol, with_gb ? "conv2d backward weight (with bias)" : "conv2d backward weight");
+    if (with_gb) expect_close(gb, tol, "conv2d backward bias");
+  }
+}
+
+// Forces a convolution plan choice for one test; restores the automatic one when it ends.
+struct PlanOverride {
+  PlanOverride(int layout, size_t chunk_budget, int depthwise = -1) {
+    onednn::set_conv_layout_override(layout);
+    onednn::set_conv_chunk_budget_override(chunk_budget);
+    onednn::set_depthwise_kernel_override(depthwise);
+  }
+  ~PlanOverride() {
+    onednn::set_conv_layout_override(-1);
+    onednn::set_conv_chunk_budget_override(0);
+    onednn::set_depthwise_kernel_override(-1);
+  }
+};
+
+TEST(OnednnConv, MatchesReferenceAllCases) {
+  for (const ConvCase& cc : conv_cases()) check_conv_case(cc);
+}
+
+// The same cases through the other plans: the default sends depthwise convolutions to the
+// hand-written kernel; these run them on oneDNN primitives too.
+TEST(OnednnConv, MatchesReferenceBatchSplitIntoChunks) {
+  // A 1-byte budget runs every image as its own chunk (summed weight gradients included).
+  PlanOverride o(static_cast<int>(onednn::ActivationLayout::preferred), 1, 0);
+  for (const ConvCase& cc : conv_cases()) check_conv_case(cc);
+}
+
+TEST(OnednnConv, MatchesReferenceWithPreferredLayoutWholeBatch) {
+  PlanOverride o(static_cast<int>(onednn::ActivationLayout::preferred), size_t{1} << 40, 0);
+  for (const ConvCase& cc : conv_cases()) check_conv_case(cc);
+}
+
+TEST(OnednnConv, MatchesReferenceWithNchwActivations) {
+  PlanOverride o(static_cast<int>(onednn::ActivationLayout::nchw), 0, 0);
+  for (const ConvCase& cc : conv_cases()) check_conv_case(cc);
+}
+
+// ---- Transposed convolution ------------------------------------------------------------------
+
+struct DeconvCase {
+  const char* name;
+  int64_t n, c, h, w, o, kh, kw;  // c input channels, o output channels
+  ConvTranspose2dParams p;
+  bool bias;
+};
+
+ConvTranspose2dParams deconv_params(int s, int pt, int pb, int pl, int pr, int op_h, int op_w,
+                                    int d = 1, int g = 1) {
+  ConvTranspose2dParams p;
+  p.stride_h = p.stride_w = s;
+  p.pad_top = pt, p.pad_bottom = pb, p.pad_left = pl, p.pad_right = pr;
+  p.output_padding_h = op_h, p.output_padding_w = op_w;
+  p.dilation_h = p.dilation_w = d;
+  p.groups = g;
+  return p;
+}
+
+const std::vector<DeconvCase>& deconv_cases() {
+  static const std::vector<DeconvCase> cases = {
+      {"k4 s2 p1", 2, 6, 5, 7, 4, 4, 4, deconv_params(2, 1, 1, 1, 1, 0, 0), true},
+      {"k4 s2 p1 no bias", 2, 6, 5, 7, 4, 4, 4, deconv_params(2, 1, 1, 1, 1, 0, 0), false},
+      {"k4 s2 p1 output_padding 1", 2, 5, 4, 6, 3, 4, 4, deconv_params(2, 1, 1, 1, 1, 1, 1), true},
+      {"k3 s2 p0 output_padding 1 (negative right pad)", 1, 3, 5, 4, 4, 3, 3,
+       deconv_params(2, 0, 0, 0, 0, 1, 1), true},
+      {"k3 s2 p1 output_padding 1 h only", 2, 4, 5, 6, 5, 3, 3, deconv_params(2, 1, 1, 1, 1, 1, 0),
+       false},
+      {"k3 s1 p1", 2, 3, 6, 7, 5, 3, 3, deconv_params(1, 1, 1, 1, 1, 0, 0), true},
+      {"k5 s3 asym pads op 2", 1, 4, 4, 5, 3, 5, 5, deconv_params(3, 1, 2, 2, 0, 2, 1), true},
+      {"dilation 2", 2, 3, 5, 5, 4, 3, 3, deconv_params(2, 1, 1, 1, 1, 1, 1, 2), true},
+      {"groups 2", 2, 4, 5, 4, 6, 4, 4, deconv_params(2, 1, 1, 1, 1, 0, 0, 1, 2), true},
+      {"1x1 input", 2, 8, 1, 1, 4, 4, 4, deconv_params(2, 1, 1, 1, 1, 0, 0), true},
+      {"blocked channels 32->16", 2, 32, 6, 5, 16, 4, 4, deconv_params(2, 1, 1, 1, 1, 0, 0), true},
+  };
+  return cases;
+}
+
+void check_deconv_case(const DeconvCase& dc) {
+  SCOPED_TRACE(dc.name);
+  Generator gen(23);
+  const ConvTranspose2dParams& p = dc.p;
+  const int64_t oh = (dc.h - 1) * p.stride_h - p.pad_top - p.pad_bottom +
+                     p.dilation_h * (dc.kh - 1) + p.output_padding_h + 1;
+  const int64_t ow = (dc.w - 1) * p.stride_w - p.pad_left - p.pad_right +
+                     p.dilation_w * (dc.kw - 1) + p.output_padding_w + 1;
+  const Shape xs = {dc.n, dc.c, dc.h, dc.w}, ws = {dc.c, dc.o / p.groups, dc.kh, dc.kw};
+  const Shape ys = {dc.n, dc.o, oh, ow};
+  Pair x = normal(xs, gen), w = normal(ws, gen, 0.5), b = dc.bias ? normal({dc.o}, gen) : none();
+  Pair gy = normal(ys, gen);
+
+  Pair y = outputs(ys);
+  run_both(OpId::conv_transpose2d, {x, w, b}, {y}, &p);
+  expect_close(y, 1e-4, "conv_transpose2d forward");
+
+  Pair gx = outputs(xs);
+  run_both(OpId::conv_transpose2d_backward_data, {gy, w}, {gx}, &p);
+  expect_close(gx, 1e-4, "conv_transpose2d backward data");
+
+  const double tol = sum_tolerance(dc.n * oh * ow);
+  for (bool with_gb : {true, false}) {
+    Pair gw = outputs(ws), gb = with_gb ? outputs({dc.o}) : none();
+    run_both(OpId::conv_transpose2d_backward_weight, {gy, x}, {gw, gb}, &p);
+    expect_close(gw, tol, "conv_transpose2d backward weight");
+    if (with_gb) expect_close(gb, tol, "conv_transpose2d backward bias");
+  }
+}
+
+TEST(OnednnDeconv, MatchesReferenceAllCases) {
+  for (const DeconvCase& dc : deconv_cases()) check_deconv_case(dc);
+}
+
+TEST(OnednnDeconv, MatchesReferenceBatchSplitIntoChunks) {
+  PlanOverride o(static_cast<int>(onednn::ActivationLayout::preferred), 1);
+  for (const DeconvCase& dc : deconv_cases()) check_deconv_case(dc);
+}
+
+// ---- Batch norm ------------------------------------------------------------------------------
+
+struct BnCase {
+  Shape shape;
+  bool training, gamma, beta;
+};
+
+std::string bn_name(const BnCase& c) {
+  return shape_str(c.shape) + (c.training ? " train" : " eval") + (c.gamma ? " gamma" : "") +
+         (c.beta ? " beta" : "");
+}
+
+TEST(OnednnBatchNorm, ForwardBackwardAndRunningStatsMatchReference) {
+  std::vector<BnCase> cases;
+  for (const Shape& s : {Shape{2, 3, 5, 7}, Shape{1, 4, 1, 3}, Shape{4, 20, 3, 3}}) {
+    for (bool training : {true, false}) {
+      for (int affine = 0; affine < 4; ++affine) {
+        cases.push_back({s, training, (affine & 1) != 0, (affine & 2) != 0});
+      }
+    }
+  }
+  for (const BnCase& bc : cases) {
+    SCOPED_TRACE(bn_name(bc));
+    Generator gen(31);
+    const int64_t c = bc.shape[1];
+    BatchNormParams p;
+    p.training = bc.training;
+    p.momentum = 0.2;
+    p.eps = 1e-3;
+    Pair x = normal(bc.shape, gen, 2.0, 0.5);
+    Pair gamma = bc.gamma ? uniform({c}, gen, 0.5, 1.5) : none();
+    Pair beta = bc.beta ? normal({c}, gen) : none();
+    Pair rmean = normal({c}, gen, 0.3), rvar = uniform({c}, gen, 0.5, 2.0);
+    Pair y = outputs(bc.shape), mean = outputs({c}), invstd = outputs({c});
+    run_both(OpId::batch_norm, {x, gamma, beta, rmean, rvar}, {y, mean, invstd}, &p);
+    expect_close(y, 1e-4, "y");
+    expect_close(mean, 1e-4, "mean");
+    expect_close(invstd, 1e-4, "invstd");
+    expect_close(rmean, 1e-4, "running mean");
+    expect_close(rvar, 1e-4, "running var");
+
+    Pair gy = normal(bc.shape, gen);
+    // All gradients, then each one alone (the others undefined).
+    for (int wanted = 0; wanted < 4; ++wanted) {
+      const bool want_gx = wanted == 0 || wanted == 1;
+      const bool want_gg = bc.gamma && (wanted == 0 || wanted == 2);
+      const bool want_gb = bc.beta && (wanted == 0 || wanted == 3);
+      if (!want_gx && !want_gg && !want_gb) continue;
+      Pair gx = want_gx ? outputs(bc.shape) : none();
+      Pair gg = want_gg ? outputs({c}) : none(), gb = want_gb ? outputs({c}) : none();
+      // The reference takes mean / invstd from its own forward; ours from its own.
+      run_both(OpId::batch_norm_backward, {gy, x, gamma, mean, invstd}, {gx, gg, gb}, &p);
+      const double tol = sum_tolerance(x.t64.numel() / c);
+      if (want_gx) expect_close(gx, tol, "gx");
+      if (want_gg) expect_close(gg, tol, "ggamma");
+      if (want_gb) expect_close(gb, tol, "gbeta");
+    }
+  }
+}
+
+TEST(OnednnBatchNorm, TrainingUpdatesRunningStatsWithUnbiasedVariance) {
+  // One channel holding {1, 3}: mean 2, biased var 1, unbiased var 2.
+  Tensor x = Tensor::from_vector(std::vector<double>{1.0, 3.0}, {2, 1, 1, 1}, DType::f32);
+  Tensor rm = Tensor::from_vector(std::vector<double>{0.0}, {1}, DType::f32);
+  Tensor rv = Tensor::from_vector(std::vector<double>{1.0}, {1}, DType::f32);
+  Tensor y = Tensor::empty({2, 1, 1, 1}), mean = Tensor::empty({1}), invstd = Tensor::empty({1});
+  BatchNormParams p;
+  p.momentum = 0.1;
+  p.eps = 0.0;
+  KernelArgs a{{x, Tensor(), Tensor(), rm, rv}, {y, mean, invstd}, &p};
+  kernel(OpId::batch_norm, DType::f32).fn(a);
+  EXPECT_NEAR(mean.item(), 2.0, 1e-6);
+  EXPECT_NEAR(invstd.item(), 1.0, 1e-6);
+  EXPECT_NEAR(rm.item(), 0.9 * 0.0 + 0.1 * 2.0, 1e-6);
+  EXPECT_NEAR(rv.item(), 0.9 * 1.0 + 0.1 * 2.0, 1e-6);
+  EXPECT_NEAR(y.to_vector()[0], -1.0, 1e-6);
+  EXPECT_NEAR(y.to_vector()[1], 1.0, 1e-6);
+}
+
+// ---- Pooling -----------------------------------------------------------------------------------
+
+struct PoolCase {
+  const char* name;
+  int64_t n, c, h, w;
+  Pool2dParams p;
+};
+
+Pool2dParams pool_params(int k, int s, int pt, int pb, int pl, int pr, bool ceil, bool include) {
+  Pool2dParams p;
+  p.kernel_h = p.kernel_w = k;
+  p.stride_h = p.stride_w = s;
+  p.pad_top = pt, p.pad_bottom = pb, p.pad_left = pl, p.pad_right = pr;
+  p.ceil_mode = ceil;
+  p.count_include_pad = include;
+  return p;
+}
+
+// PyTorch's pooling output size (as engine/ops_nn.cpp).
+int64_t pool_out(int64_t in, int k, int s, int pb, int pa, bool ceil_mode) {
+  const int64_t span = in + pb + pa - k;
+  int64_t out = (ceil_mode ? (span + s - 1) / s : span / s) + 1;
+  if (ceil_mode && (out - 1) * s >= in + pb) --out;
+  return out;
+}
+
+TEST(OnednnPool, MaxAndAvgForwardBackwardMatchReference) {
+  const std::vector<PoolCase> cases = {
+      {"k2 s2", 2, 3, 6, 8, pool_params(2, 2, 0, 0, 0, 0, false, true)},
+      {"k2 s2 odd floor", 2, 3, 7, 9, pool_params(2, 2, 0, 0, 0, 0, false, true)},
+      {"k2 s2 odd ceil", 2, 3, 7, 9, pool_params(2, 2, 0, 0, 0, 0, true, true)},
+      {"k3 s2 p1", 1, 4, 9, 10, pool_params(3, 2, 1, 1, 1, 1, false, true)},
+      {"k3 s2 p1 ceil include pad", 2, 2, 8, 6, pool_params(3, 2, 1, 1, 1, 1, true, true)},
+      {"k3 s2 p1 ceil exclude pad", 2, 2, 8, 6, pool_params(3, 2, 1, 1, 1, 1, true, false)},
+      {"k3 s2 p0 ceil include pad", 1, 3, 6, 8, pool_params(3, 2, 0, 0, 0, 0, true, true)},
+      {"k3 s1 p1 exclude pad", 2, 3, 5, 5, pool_params(3, 1, 1, 1, 1, 1, false, false)},
+      {"k3 s3 asym pads", 1, 3, 8, 7, pool_params(3, 3, 0, 1, 1, 0, false, true)},
+      {"k3 s3 asym pads ceil", 1, 3, 8, 7, pool_params(3, 3, 0, 1, 1, 0, true, true)},
+      {"1x1 image k1", 2, 5, 1, 1, pool_params(1, 1, 0, 0, 0, 0, false, true)},
+      {"k2 s1 overlapping", 2, 3, 5, 6, pool_params(2, 1, 0, 0, 0, 0, false, true)},
+      {"blocked channels", 2, 32, 9, 7, pool_params(3, 2, 1, 1, 1, 1, true, false)},
+  };
+  for (const PoolCase& pc : cases) {
+    SCOPED_TRACE(pc.name);
+    Generator gen(41);
+    const Pool2dParams& p = pc.p;
+    const int64_t oh = pool_out(pc.h, p.kernel_h, p.stride_h, p.pad_top, p.pad_bottom, p.ceil_mode);
+    const int64_t ow = pool_out(pc.w, p.kernel_w, p.stride_w, p.pad_left, p.pad_right, p.ceil_mode);
+    const Shape xs = {pc.n, pc.c, pc.h, pc.w}, ys = {pc.n, pc.c, oh, ow};
+    Pair x = normal(xs, gen), gy = normal(ys, gen);
+    // Repeated values make ties, where the first maximum must win.
+    std::vector<double> tied = x.t64.to_vector();
+    for (size_t i = 0; i < tied.size(); i += 3) tied[i] = std::round(tied[i]);
+    Pair xt = make_pair(tied, xs);
+    for (const Pair* input : {&x, &xt}) {
+      Pair y = outputs(ys);
+      run_both(OpId::max_pool2d, {*input}, {y}, &p);
+      expect_close(y, 1e-5, "max_pool2d");
+      Pair gx = outputs(xs);
+      run_both(OpId::max_pool2d_backward, {gy, *input}, {gx}, &p);
+      expect_close(gx, 1e-5, "max_pool2d_backward");
+    }
+    Pair ya = outputs(ys);
+    run_both(OpId::avg_pool2d, {x}, {ya}, &p);
+    expect_close(ya, 1e-5, "avg_pool2d");
+    Pair gxa = outputs(xs);
+    run_both(OpId::avg_pool2d_backward, {gy}, {gxa}, &p);
+    expect_close(gxa, 1e-5, "avg_pool2d_backward");
+  }
+}
+
+// ---- Matmul ------------------------------------------------------------------------------------
+
+TEST(OnednnMatmul, TransposesAndBatchBroadcastMatchReference) {
+  struct MatmulCase {
+    int64_t batch, m, k, n, b_batch;
+  };
+  const std::vector<MatmulCase> cases = {
+      {1, 5, 7, 3, 1}, {3, 4, 6, 5, 3}, {4, 3, 8, 9, 1}, {2, 1, 5, 1, 2},
+      {1, 17, 1, 13, 1}, {2, 33, 40, 18, 1},
+  };
+  for (const MatmulCase& mc : cases) {
+    for (int t = 0; t < 4; ++t) {
+      MatmulParams p;
+      p.trans_a = (t & 1) != 0;
+      p.trans_b = (t & 2) != 0;
+      SCOPED_TRACE(std::to_string(mc.batch) + "x" + std::to_string(mc.m) + "x" +
+                   std::to_string(mc.k) + "x" + std::to_string(mc.n) + " b batch " +
+                   std::to_string(mc.b_batch) + " trans " + std::to_string(t));
+      Generator gen(53);
+      Pair a = normal(p.trans_a ? Shape{mc.batch, mc.k, mc.m} : Shape{mc.batch, mc.m, mc.k}, gen);
+      Pair b = normal(p.trans_b ? Shape{mc.b_batch, mc.n, mc.k} : Shape{mc.b_batch, mc.k, mc.n}, gen);
+      Pair c = outputs({mc.batch, mc.m, mc.n});
+      run_both(OpId::matmul, {a, b}, {c}, &p);
+      expect_close(c, 1e-4, "matmul");
+    }
+  }
+}
+
+// ---- Caches ------------------------------------------------------------------------------------
+
+TEST(OnednnCache, SecondIdenticalCallReusesThePrimitive) {
+  Generator gen(61);
+  const Conv2dParams p = conv_params(1, 1, 1, 1, 1);
+  Tensor x = Tensor::randn({2, 16, 9, 9}, gen), w = Tensor::randn({8, 16, 3, 3}, gen);
+  Tensor y = Tensor::empty({2, 8, 9, 9});
+  const KernelInfo& conv = kernel(OpId::conv2d, DType::f32);
+  KernelArgs a{{x, w, Tensor()}, {y}, &p};
+  conv.fn(a);  // builds (or finds) the primitive
+  const onednn::CacheStats before = onednn::cache_stats();
+  conv.fn(a);
+  const onednn::CacheStats after = onednn::cache_stats();
+  EXPECT_EQ(after.misses, before.misses) << "an identical call rebuilt its primitive";
+  EXPECT_EQ(after.hits, before.hits + 1);
+  // A new shape is a miss.
+  Tensor x2 = Tensor::randn({2, 16, 10, 9}, gen), y2 = Tensor::empty({2, 8, 10, 9});
+  KernelArgs a2{{x2, w, Tensor()}, {y2}, &p};
+  conv.fn(a2);
+  EXPECT_EQ(onednn::cache_stats().misses, after.misses + 1);
+}
+
+TEST(OnednnCache, ReorderedWeightsFollowInPlaceWrites) {
+  Generator gen(67);
+  const Conv2dParams p = conv_params(1, 1, 1, 1, 1);
+  Tensor x = Tensor::randn({1, 16, 6, 6}, gen), w = Tensor::randn({16, 16, 3, 3}, gen);
+  Tensor y = Tensor::empty({1, 16, 6, 6});
+  const KernelInfo& conv = kernel(OpId::conv2d, DType::f32);
+  KernelArgs a{{x, w, Tensor()}, {y}, &p};
+  conv.fn(a);
+  w.fill_(0.0);  // an in-place write bumps the storage version
+  conv.fn(a);
+  for (double v : y.to_vector()) ASSERT_EQ(v, 0.0) << "stale reordered weights were used";
+  // A different tensor with a fresh storage is never mistaken for the cached one.
+  Tensor w2 = Tensor::randn({16, 16, 3, 3}, gen);
+  KernelArgs a2{{x, w2, Tensor()}, {y}, &p};
+  conv.fn(a2);
+  double norm = 0.0;
+  for (double v : y.to_vector()) norm += v * v;
+  EXPECT_GT(norm, 0.0);
+}
+
+}  // namespace
+}  // namespace cvd

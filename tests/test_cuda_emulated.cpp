@@ -367,6 +367,18 @@ TEST(CudaEmulated, Conv2dForwardAndBackward) {
                1e-5, "conv2d backward weight");
 }
 
+TEST(CudaEmulated, Conv2dWeightGradientInChunks) {
+  // N * OH = 140 output rows of OW = 90: the weight gradient is summed in 4 chunks of 45 rows.
+  Generator gen(13);
+  Conv2dParams p;
+  p.pad_top = p.pad_bottom = p.pad_left = p.pad_right = 1;
+  const Shape x{2, 3, 70, 90}, w{4, 3, 3, 3}, y{2, 4, 70, 90};
+  expect_close(
+      run_emulated(cuda::conv2d_backward_weight_op<EmulatedLaunch>, OpId::conv2d_backward_weight,
+                   {normal(y, gen), normal(x, gen)}, {w, {4}}, &p),
+      1e-5, "conv2d backward weight, chunked");
+}
+
 TEST(CudaEmulated, ConvTranspose2dForwardAndBackward) {
   Generator gen(11);
   ConvTranspose2dParams p;

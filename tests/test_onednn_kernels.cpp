@@ -157,6 +157,9 @@ const std::vector<ConvCase>& conv_cases() {
       {"blocked channels 32->48", 2, 32, 12, 10, 48, 3, 3, conv_params(1, 1, 1, 1, 1), true},
       {"channels 20->24 7x7", 2, 20, 11, 9, 24, 7, 7, conv_params(1, 3, 3, 3, 3), true},
       {"1x1 expansion 24->96", 3, 24, 5, 6, 96, 1, 1, conv_params(1, 0, 0, 0, 0), false},
+      {"1x1 expansion bias", 2, 24, 5, 6, 96, 1, 1, conv_params(1, 0, 0, 0, 0), true},
+      {"1x1 single image", 1, 7, 3, 5, 9, 1, 1, conv_params(1, 0, 0, 0, 0), true},
+      {"1x1 stride 2", 2, 8, 7, 6, 12, 1, 1, conv_params(2, 0, 0, 0, 0), true},
       {"11x11 s1 p5", 1, 16, 13, 12, 16, 11, 11, conv_params(1, 5, 5, 5, 5), true},
   };
   return cases;
@@ -192,15 +195,17 @@ void check_conv_case(const ConvCase& cc) {
 
 // Forces a convolution plan choice for one test; restores the automatic one when it ends.
 struct PlanOverride {
-  PlanOverride(int layout, size_t chunk_budget, int depthwise = -1) {
+  PlanOverride(int layout, size_t chunk_budget, int special_kernels = -1) {
     onednn::set_conv_layout_override(layout);
     onednn::set_conv_chunk_budget_override(chunk_budget);
-    onednn::set_depthwise_kernel_override(depthwise);
+    onednn::set_depthwise_kernel_override(special_kernels);
+    onednn::set_pointwise_matmul_override(special_kernels);
   }
   ~PlanOverride() {
     onednn::set_conv_layout_override(-1);
     onednn::set_conv_chunk_budget_override(0);
     onednn::set_depthwise_kernel_override(-1);
+    onednn::set_pointwise_matmul_override(-1);
   }
 };
 
@@ -209,7 +214,7 @@ TEST(OnednnConv, MatchesReferenceAllCases) {
 }
 
 // The same cases through the other plans: the default sends depthwise convolutions to the
-// hand-written kernel; these run them on oneDNN primitives too.
+// hand-written kernel and pointwise ones to matmuls; these run them on oneDNN convolutions too.
 TEST(OnednnConv, MatchesReferenceBatchSplitIntoChunks) {
   // A 1-byte budget runs every image as its own chunk (summed weight gradients included).
   PlanOverride o(static_cast<int>(onednn::ActivationLayout::preferred), 1, 0);

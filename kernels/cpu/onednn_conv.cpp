@@ -1,6 +1,7 @@
 // conv2d, conv2d_backward_data and conv2d_backward_weight (with the bias gradient) on oneDNN
 // convolution primitives: NCHW caller tensors, PyTorch weight layout [O, C/g, KH, KW],
-// asymmetric padding, dilation and groups (incl. depthwise).
+// asymmetric padding, dilation and groups. Depthwise convolutions go to the hand-written kernel
+// of depthwise_conv2d.h and pointwise ones to matmul primitives (onednn_pointwise_conv.cpp).
 #include <cstring>
 
 #include "engine/error.h"
@@ -75,6 +76,10 @@ void conv2d(const KernelArgs& a) {
         w.data<float>(), b.defined() ? b.data<float>() : nullptr, y.data<float>());
     return;
   }
+  if (use_pointwise_matmul(pr)) {
+    pointwise_conv_forward(x, w, b, y);
+    return;
+  }
   ChunkedPrimitive& plan = conv_pass_plan<ConvolutionFamily>(pr, ConvPass::forward);
   if (b.defined()) {
     plan.execute({x, w, b, y});
@@ -98,6 +103,10 @@ void conv2d_backward_data(const KernelArgs& a) {
         gy.data<float>(), w.data<float>(), gx.data<float>());
     return;
   }
+  if (use_pointwise_matmul(pr)) {
+    pointwise_conv_backward_data(gy, w, gx);
+    return;
+  }
   conv_pass_plan<ConvolutionFamily>(pr, ConvPass::backward_data).execute({gy, w, gx});
 }
 
@@ -119,6 +128,10 @@ void conv2d_backward_weight(const KernelArgs& a) {
         depthwise_geometry(x.shape(), gw.shape(), gy.shape(), a.p<Conv2dParams>()),
         gy.data<float>(), x.data<float>(), gw.data<float>(),
         gb.defined() ? gb.data<float>() : nullptr);
+    return;
+  }
+  if (use_pointwise_matmul(pr)) {
+    pointwise_conv_backward_weight(gy, x, gw, gb);
     return;
   }
   ChunkedPrimitive& plan = conv_pass_plan<ConvolutionFamily>(pr, ConvPass::backward_weights);

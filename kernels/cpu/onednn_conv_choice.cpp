@@ -11,6 +11,7 @@ namespace {
 std::atomic<int> g_layout_override{-1};
 std::atomic<size_t> g_chunk_budget_override{0};
 std::atomic<int> g_depthwise_override{-1};
+std::atomic<int> g_pointwise_override{-1};
 
 // Reordered activation bytes (input and output side) of one chunk above which the batch is split:
 // the chunk's blocked copies should still be in the (private + shared) caches when the primitive
@@ -28,6 +29,16 @@ int64_t volume(const dnnl::memory::dims& d, size_t from) {
 void set_conv_layout_override(int layout) { g_layout_override = layout; }
 void set_conv_chunk_budget_override(size_t bytes) { g_chunk_budget_override = bytes; }
 void set_depthwise_kernel_override(int mode) { g_depthwise_override = mode; }
+void set_pointwise_matmul_override(int mode) { g_pointwise_override = mode; }
+
+bool use_pointwise_matmul(const ConvProblem& p) {
+  const bool pointwise = p.groups == 1 && p.weights.size() == 4 && p.weights[2] == 1 &&
+                         p.weights[3] == 1 && p.strides == dnnl::memory::dims{1, 1} &&
+                         p.pad_l == dnnl::memory::dims{0, 0} && p.pad_r == dnnl::memory::dims{0, 0};
+  if (!pointwise) return false;
+  const int forced = g_pointwise_override.load();
+  return forced < 0 ? true : forced == 1;
+}
 
 bool use_depthwise_kernel(const ConvProblem& p, ConvPass /*pass*/) {
   const bool depthwise = p.groups > 1 && p.groups == p.src[1] && p.groups == p.dst[1];

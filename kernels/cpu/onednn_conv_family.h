@@ -44,12 +44,24 @@ ConvPlanChoice choose_conv_plan(const ConvProblem& p, ConvPass pass);
 // kernel of cpu/depthwise_conv2d.h instead of a oneDNN primitive.
 bool use_depthwise_kernel(const ConvProblem& p, ConvPass pass);
 
+// Whether a pointwise convolution (1x1 kernel, stride 1, no padding, one group) runs as oneDNN
+// matmul primitives straight on the NCHW tensors (onednn_pointwise_conv.cpp): per image it is
+// the matrix product W [O, C] x X [C, H*W], no reorders needed.
+bool use_pointwise_matmul(const ConvProblem& p);
+
+// The pointwise passes; shapes as the conv2d kernels' (x [N, C, H, W], w [O, C, 1, 1]).
+void pointwise_conv_forward(const Tensor& x, const Tensor& w, const Tensor& b, const Tensor& y);
+void pointwise_conv_backward_data(const Tensor& gy, const Tensor& w, const Tensor& gx);
+void pointwise_conv_backward_weight(const Tensor& gy, const Tensor& x, const Tensor& gw,
+                                    const Tensor& gb);
+
 // Tuning overrides for tests and benchmarks: a forced layout (-1: automatic), the byte budget of
 // the reordered activations of one chunk (0: automatic), and the depthwise kernel choice
-// (-1: automatic, 0: never, 1: always).
+// (-1: automatic, 0: never, 1: always), and the pointwise matmul choice (same values).
 void set_conv_layout_override(int layout);
 void set_conv_chunk_budget_override(size_t bytes);
 void set_depthwise_kernel_override(int mode);
+void set_pointwise_matmul_override(int mode);
 
 struct ConvolutionFamily {
   using forward = dnnl::convolution_forward;

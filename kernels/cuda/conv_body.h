@@ -8,6 +8,7 @@
 #pragma once
 #include "engine/dispatch.h"
 #include "kernels/cuda/launch_body.h"
+#include "kernels/cuda/layout_body.h"
 #include "kernels/kernel_params.h"
 
 namespace cvd::cuda {
@@ -93,31 +94,35 @@ struct ConvBackwardDataBody {
   }
 };
 
-// gw[o, kc, kh, kw] = sum_{n, oh, ow} out_grad[n, o, oh, ow] * in[n, c, ih, iw].
+// gw[o, kc, kh, kw] = sum_{n, oh, ow} out_grad[n, o, oh, ow] * in[n, c, ih, iw], split over the
+// N * OH output rows into `chunks` chunks of `rows` rows: thread t = (weight element, chunk)
+// writes its partial sum to partial[t] (double), added up by PartialSumBody (layout_body.h).
 template <class T>
 struct ConvBackwardWeightBody {
   const T *out_grad, *in;
-  T* gw;
+  double* partial;
   ConvGeometry g;
-  CVD_HOST_DEVICE void operator()(int64_t i) const {
+  int64_t rows, chunks;
+  CVD_HOST_DEVICE void operator()(int64_t t) const {
+    const int64_t i = t / chunks, chunk = t % chunks;
     const int64_t kw = i % g.kw, kh = (i / g.kw) % g.kh, kc = (i / (g.kw * g.kh)) % g.cpg();
     const int64_t o = i / (g.kw * g.kh * g.cpg());
     const int64_t c = (o / g.opg()) * g.cpg() + kc;
+    const int64_t row_end = (chunk + 1) * rows < g.n * g.oh ? (chunk + 1) * rows : g.n * g.oh;
     double acc = 0.0;
-    for (int64_t n = 0; n < g.n; ++n) {
-      const T* go = out_grad + (n * g.o + o) * g.oh * g.ow;
-      const T* plane = in + (n * g.c + c) * g.h * g.w;
-      for (int64_t oh = 0; oh < g.oh; ++oh) {
-        const int64_t ih = oh * g.stride_h - g.pad_top + kh * g.dil_h;
-        if (ih < 0 || ih >= g.h) continue;
-        for (int64_t ow = 0; ow < g.ow; ++ow) {
-          const int64_t iw = ow * g.stride_w - g.pad_left + kw * g.dil_w;
-          if (iw < 0 || iw >= g.w) continue;
-          acc += static_cast<double>(go[oh * g.ow + ow]) * plane[ih * g.w + iw];
-        }
+    for (int64_t row = chunk * rows; row < row_end; ++row) {
+      const int64_t n = row / g.oh, oh = row % g.oh;
+      const int64_t ih = oh * g.stride_h - g.pad_top + kh * g.dil_h;
+      if (ih < 0 || ih >= g.h) continue;
+      const T* go = out_grad + ((n * g.o + o) * g.oh + oh) * g.ow;
+      const T* in_row = in + ((n * g.c + c) * g.h + ih) * g.w;
+      for (int64_t ow = 0; ow < g.ow; ++ow) {
+        const int64_t iw = ow * g.stride_w - g.pad_left + kw * g.dil_w;
+        if (iw < 0 || iw >= g.w) continue;
+        acc += static_cast<double>(go[ow]) * in_row[iw];
       }
     }
-    gw[i] = static_cast<T>(acc);
+    partial[t] = acc;
   }
 };
 
@@ -150,6 +155,22 @@ void bias_gradient(const KernelArgs& a) {
                                        gy.shape()[1], gy.shape()[2] * gy.shape()[3]});
 }
 
+// gw = the weight gradient of the convolution g (out_grad on its output side, in on its input
+// side), in chunks of about 4096 multiply-adds per thread.
+template <class Launch>
+void conv_weight_gradient(const Tensor& out_grad, const Tensor& in, const Tensor& gw,
+                          const ConvGeometry& g) {
+  const int64_t rows = g.ow >= 4096 ? 1 : 4096 / (g.ow > 0 ? g.ow : 1);
+  const int64_t total_rows = g.n * g.oh;
+  const int64_t chunks = total_rows == 0 ? 1 : (total_rows + rows - 1) / rows;
+  const Tensor partial = Tensor::empty({gw.numel() * chunks}, DType::f64, gw.device());
+  Launch::launch(gw.numel() * chunks,
+                 ConvBackwardWeightBody<float>{out_grad.data<float>(), in.data<float>(),
+                                               partial.data<double>(), g, rows, chunks});
+  Launch::launch(gw.numel(),
+                 PartialSumBody<float>{partial.data<double>(), gw.data<float>(), chunks});
+}
+
 // in {x, w, b?}, out {y}.
 template <class Launch>
 void conv2d_op(const KernelArgs& a) {
@@ -173,9 +194,7 @@ template <class Launch>
 void conv2d_backward_weight_op(const KernelArgs& a) {
   const Tensor &gy = a.in[0], &x = a.in[1], &gw = a.out[0];
   if (gw.defined()) {
-    Launch::launch(gw.numel(), ConvBackwardWeightBody<float>{
-                                   gy.data<float>(), x.data<float>(), gw.data<float>(),
-                                   conv_geometry(x, gw, gy, a.p<Conv2dParams>())});
+    conv_weight_gradient<Launch>(gy, x, gw, conv_geometry(x, gw, gy, a.p<Conv2dParams>()));
   }
   bias_gradient<Launch>(a);
 }
@@ -204,9 +223,7 @@ template <class Launch>
 void conv_transpose2d_backward_weight_op(const KernelArgs& a) {
   const Tensor &gy = a.in[0], &x = a.in[1], &gw = a.out[0];
   if (gw.defined()) {
-    Launch::launch(gw.numel(), ConvBackwardWeightBody<float>{
-                                   x.data<float>(), gy.data<float>(), gw.data<float>(),
-                                   conv_geometry(gy, gw, x, a.p<ConvTranspose2dParams>())});
+    conv_weight_gradient<Launch>(x, gy, gw, conv_geometry(gy, gw, x, a.p<ConvTranspose2dParams>()));
   }
   bias_gradient<Launch>(a);
 }

@@ -1,0 +1,129 @@
+// Pointwise (1x1, stride 1, unpadded, ungrouped) convolutions as oneDNN matmul primitives on the
+// NCHW tensors themselves. With P = H * W pixels, per image n:
+//   forward:          y_n [O, P] = W [O, C] x_n [C, P] + b      (W broadcast over the batch)
+//   backward data:    gx_n [C, P] = W^T [C, O] gy_n [O, P]      (W^T as strides, no copy)
+//   backward weights: gW [O, C] = sum_n gy_n [O, P] x_n^T [P, C] (batched, then summed over n)
+// Measured faster than oneDNN's blocked 1x1 convolution even before counting its reorders
+// (bench/bench_conv.cpp, shape 1x1_96-576_16x20).
+#include <cstring>
+#include <vector>
+
+#include "engine/error.h"
+#include "kernels/cpu/cpu_parallel.h"
+#include "kernels/cpu/onednn_conv_family.h"
+
+namespace cvd::onednn {
+
+namespace {
+
+using dims = dnnl::memory::dims;
+
+dnnl::memory::desc f32(const dims& d, const dims& strides) {
+  return dnnl::memory::desc(d, dnnl::memory::data_type::f32, strides);
+}
+
+struct MatmulPlan {
+  dnnl::matmul prim;
+  dnnl::memory::desc src, weights, dst, bias;
+};
+
+enum class Pass : int64_t { forward = 1, backward_data = 2, backward_weights = 3 };
+
+// The matmul of one pass; n images, o output and c input channels, p pixels.
+MatmulPlan& plan(Pass pass, int64_t n, int64_t o, int64_t c, int64_t p, bool bias) {
+  static PrimitiveCache<MatmulPlan> cache;
+  CacheKey key;
+  key.add(static_cast<int64_t>(pass)).add({n, o, c, p, bias ? 1 : 0}).add(onednn_threads());
+  return cache.get(key, [&] {
+    auto e = std::make_unique<MatmulPlan>();
+    switch (pass) {
+      case Pass::forward:
+        e->src = f32({1, o, c}, {o * c, c, 1});
+        e->weights = f32({n, c, p}, {c * p, p, 1});
+        e->dst = f32({n, o, p}, {o * p, p, 1});
+        if (bias) e->bias = f32({1, o, 1}, {o, 1, 1});
+        break;
+      case Pass::backward_data:
+        e->src = f32({1, c, o}, {o * c, 1, c});  // W^T
+        e->weights = f32({n, o, p}, {o * p, p, 1});
+        e->dst = f32({n, c, p}, {c * p, p, 1});
+        break;
+      case Pass::backward_weights:
+        e->src = f32({n, o, p}, {o * p, p, 1});
+        e->weights = f32({n, p, c}, {c * p, 1, p});  // x_n^T
+        e->dst = f32({n, o, c}, {o * c, c, 1});
+        break;
+    }
+    dnnl::matmul::desc d = bias ? dnnl::matmul::desc(e->src, e->weights, e->bias, e->dst)
+                                : dnnl::matmul::desc(e->src, e->weights, e->dst);
+    e->prim = dnnl::matmul(dnnl::matmul::primitive_desc(d, cpu_engine()));
+    return e;
+  });
+}
+
+dnnl::memory memory_of(const Tensor& t, const dnnl::memory::desc& md) {
+  return dnnl::memory(md, cpu_engine(), t.data_ptr());
+}
+
+}  // namespace
+
+void pointwise_conv_forward(const Tensor& x, const Tensor& w, const Tensor& b, const Tensor& y) {
+  const int64_t n = x.size(0), c = x.size(1), o = y.size(1), p = x.size(2) * x.size(3);
+  MatmulPlan& e = plan(Pass::forward, n, o, c, p, b.defined());
+  std::unordered_map<int, dnnl::memory> args = {{DNNL_ARG_SRC, memory_of(w, e.src)},
+                                                {DNNL_ARG_WEIGHTS, memory_of(x, e.weights)},
+                                                {DNNL_ARG_DST, memory_of(y, e.dst)}};
+  if (b.defined()) args[DNNL_ARG_BIAS] = memory_of(b, e.bias);
+  e.prim.execute(cpu_stream(), args);
+  cpu_stream().wait();
+}
+
+void pointwise_conv_backward_data(const Tensor& gy, const Tensor& w, const Tensor& gx) {
+  const int64_t n = gx.size(0), c = gx.size(1), o = gy.size(1), p = gx.size(2) * gx.size(3);
+  MatmulPlan& e = plan(Pass::backward_data, n, o, c, p, false);
+  e.prim.execute(cpu_stream(), {{DNNL_ARG_SRC, memory_of(w, e.src)},
+                                {DNNL_ARG_WEIGHTS, memory_of(gy, e.weights)},
+                                {DNNL_ARG_DST, memory_of(gx, e.dst)}});
+  cpu_stream().wait();
+}
+
+void pointwise_conv_backward_weight(const Tensor& gy, const Tensor& x, const Tensor& gw,
+                                    const Tensor& gb) {
+  const int64_t n = x.size(0), c = x.size(1), o = gy.size(1), p = x.size(2) * x.size(3);
+  MatmulPlan& e = plan(Pass::backward_weights, n, o, c, p, false);
+  // One product per image into scratch (straight into gw for a single image), then summed.
+  float* per_image = n == 1 ? gw.data<float>()
+                            : static_cast<float*>(scratch_buffer(0, e.dst.get_size()));
+  e.prim.execute(cpu_stream(), {{DNNL_ARG_SRC, memory_of(gy, e.src)},
+                                {DNNL_ARG_WEIGHTS, memory_of(x, e.weights)},
+                                {DNNL_ARG_DST, dnnl::memory(e.dst, cpu_engine(), per_image)}});
+  cpu_stream().wait();
+  float* gwp = gw.data<float>();
+  const float* gyp = gy.data<float>();
+  float* gbp = gb.defined() ? gb.data<float>() : nullptr;
+  cpu::parallel_ranges(o, n * (c + p), [&](int64_t begin, int64_t end) {
+    for (int64_t oc = begin; oc < end; ++oc) {
+      if (n > 1) {
+        float* row = gwp + oc * c;
+        std::memcpy(row, per_image + oc * c, c * sizeof(float));
+        for (int64_t img = 1; img < n; ++img) {
+          const float* src = per_image + (img * o + oc) * c;
+          for (int64_t k = 0; k < c; ++k) row[k] += src[k];
+        }
+      }
+      if (gbp != nullptr) {
+        double sum = 0.0;
+        for (int64_t img = 0; img < n; ++img) {
+          const float* g = gyp + (img * o + oc) * p;
+          float partial = 0.0f;
+#pragma omp simd reduction(+ : partial)
+          for (int64_t k = 0; k < p; ++k) partial += g[k];
+          sum += partial;
+        }
+        gbp[oc] = static_cast<float>(sum);
+      }
+    }
+  });
+}
+
+}  // namespace cvd::onednn

@@ -183,9 +183,13 @@ TEST(PublicApi, PipelineReportsProgressAndReturnsResultsInMemory) {
   bool some_stage_completed = false;
   for (const cvd::PipelineProgress& p : reports) {
     EXPECT_FALSE(p.stage.empty());
-    if (p.total > 0) EXPECT_LE(p.done, p.total) << p.stage;  // total 0 = not known yet
+    if (p.total > 0) {  // total 0 = not known yet
+      EXPECT_LE(p.done, p.total) << p.stage;
+    }
     auto it = last.find(p.stage);
-    if (it != last.end()) EXPECT_GE(p.done, it->second) << p.stage;
+    if (it != last.end()) {
+      EXPECT_GE(p.done, it->second) << p.stage;
+    }
     last[p.stage] = p.done;
     some_stage_completed |= p.total > 0 && p.done == p.total;
   }

@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "engine/layers.h"
 
@@ -75,5 +76,19 @@ class FeatureFusionBlock : public Module {
   std::shared_ptr<Conv2d> out_conv_;
   std::shared_ptr<ResidualConvUnit> rcu1_, rcu2_;
 };
+
+// Module prefixes of a MiDaS network in the order its forward runs them (DepthNet::
+// execution_order): encoder, then per level 4..1 layerN_rn, refinenetN (resConfUnit1,
+// resConfUnit2, out_conv), then output_conv. Registration lists layer1_rn..layer4_rn first.
+inline std::vector<std::string> midas_decoder_execution_order() {
+  std::vector<std::string> order{"pretrained"};
+  for (int i = 4; i >= 1; --i) {
+    const std::string r = "scratch.refinenet" + std::to_string(i);
+    order.insert(order.end(), {"scratch.layer" + std::to_string(i) + "_rn", r + ".resConfUnit1",
+                               r + ".resConfUnit2", r + ".out_conv"});
+  }
+  order.push_back("scratch.output_conv");
+  return order;
+}
 
 }  // namespace cvd

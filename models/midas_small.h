@@ -20,6 +20,7 @@
 // The same rule is in tools/reference/midas_models.py.
 #pragma once
 #include "models/depth_net.h"
+#include "models/midas_blocks.h"
 
 namespace cvd {
 
@@ -33,17 +34,9 @@ class MidasSmallNet : public DepthNet {
   Tensor normalize_input(const Tensor& rgb01) const override;
   Tensor forward_raw(const Tensor& x) override;
   Tensor output_bias() override;
-  // Execution order of the fusion decoder: layer4_rn, refinenet4 (resConfUnit1, resConfUnit2,
-  // out_conv), layer3_rn, refinenet3, ... (registration lists layer1_rn..layer4_rn first).
+  // See midas_decoder_execution_order (models/midas_blocks.h).
   std::vector<std::string> execution_order() const override {
-    std::vector<std::string> order{"pretrained"};
-    for (int i = 4; i >= 1; --i) {
-      const std::string r = "scratch.refinenet" + std::to_string(i);
-      order.insert(order.end(), {"scratch.layer" + std::to_string(i) + "_rn", r + ".resConfUnit1",
-                                 r + ".resConfUnit2", r + ".out_conv"});
-    }
-    order.push_back("scratch.output_conv");
-    return order;
+    return midas_decoder_execution_order();
   }
   std::string type_name() const override { return "MidasNet_small"; }
 

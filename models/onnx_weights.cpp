@@ -208,8 +208,8 @@ std::vector<GraphLayer> graph_layers(const OnnxGraph& g) {
 
 // The network's weight layers, split into those its forward runs (in execution order) and those
 // it never runs.
-void model_layers(const DepthNet& net, std::vector<ModelLayer>& used,
-                  std::vector<ModelLayer>& unused) {
+void model_layers(const Module& net, const std::vector<std::string>& execution_order,
+                  std::vector<ModelLayer>& used, std::vector<ModelLayer>& unused) {
   std::vector<ModelLayer> all;
   for (const auto& [name, m] : net.named_modules()) {
     ModelLayer l{LayerKind::conv, name, m, {}};
@@ -229,7 +229,7 @@ void model_layers(const DepthNet& net, std::vector<ModelLayer>& used,
     all.push_back(std::move(l));
   }
   std::vector<bool> placed(all.size(), false);
-  for (const std::string& prefix : net.execution_order())
+  for (const std::string& prefix : execution_order)
     for (size_t i = 0; i < all.size(); ++i) {
       const std::string& p = all[i].prefix;
       const bool under = prefix.empty() || p == prefix ||
@@ -406,7 +406,44 @@ const std::set<std::string>& onnx_supported_ops() {
   return ops;
 }
 
+namespace {
+
+// Drops the graph layers whose stored tensors are exactly an earlier layer's (a module applied
+// twice, as FlowNetC's conv1..conv3 on both images); returns how many were dropped.
+size_t drop_shared_layers(std::vector<GraphLayer>& layers) {
+  std::set<std::string> seen;
+  std::vector<GraphLayer> kept;
+  size_t dropped = 0;
+  for (auto& l : layers) {
+    bool stored = !l.tensors.empty();
+    std::string key = graph_kind_name(l.kind);
+    for (const auto& t : l.tensors) {
+      stored = stored && t.tensor != nullptr;
+      key += "|" + t.role + "=" + t.value;
+    }
+    if (stored && !seen.insert(key).second) {
+      ++dropped;
+      continue;
+    }
+    kept.push_back(std::move(l));
+  }
+  layers = std::move(kept);
+  return dropped;
+}
+
+}  // namespace
+
 OnnxConversionReport load_onnx_weights(const OnnxModel& model, DepthNet& net) {
+  OnnxNetworkSpec spec;
+  spec.arch = net.arch();
+  spec.execution_order = net.execution_order();
+  OnnxConversionReport report = load_onnx_weights(model, net, spec);
+  resize_warnings(model, net, report);
+  return report;
+}
+
+OnnxConversionReport load_onnx_weights(const OnnxModel& model, Module& net,
+                                       const OnnxNetworkSpec& spec) {
   const std::string file = model.path.string();
   OnnxConversionReport report;
 
@@ -416,7 +453,9 @@ OnnxConversionReport load_onnx_weights(const OnnxModel& model, DepthNet& net) {
     const std::string key =
         n.domain.empty() ? n.op_type : fmt::format("{} (domain {})", n.op_type, n.domain);
     ++report.op_counts[key];
-    if (!n.domain.empty() || !onnx_supported_ops().count(n.op_type)) ++unsupported[key];
+    const bool supported = n.domain.empty() ? onnx_supported_ops().count(n.op_type) > 0
+                                            : spec.custom_ops.count({n.domain, n.op_type}) > 0;
+    if (!supported) ++unsupported[key];
   }
   std::vector<std::string> problems;
   if (!unsupported.empty()) {
@@ -424,6 +463,8 @@ OnnxConversionReport load_onnx_weights(const OnnxModel& model, DepthNet& net) {
     for (const auto& [op, count] : unsupported) parts.push_back(fmt::format("{} x{}", op, count));
     problems.push_back(fmt::format("unsupported op types: {}", fmt::join(parts, ", ")));
   }
+  if (spec.check_graph) spec.check_graph(model, problems, report);
+  const bool refused_as_unsupported = !problems.empty();
 
   // 2. Layers on both sides.
   std::vector<GraphLayer> graph;
@@ -432,8 +473,9 @@ OnnxConversionReport load_onnx_weights(const OnnxModel& model, DepthNet& net) {
   } catch (const Error& e) {
     fail(ErrorCategory::format, "{}: {}", file, e.what());
   }
+  report.shared_uses = drop_shared_layers(graph);
   std::vector<ModelLayer> used, unused;
-  model_layers(net, used, unused);
+  model_layers(net, spec.execution_order, used, unused);
   for (const auto& l : unused)
     for (const auto& [role, t] : l.tensors) report.unused_in_forward.push_back(l.state_name(role));
 
@@ -447,7 +489,7 @@ OnnxConversionReport load_onnx_weights(const OnnxModel& model, DepthNet& net) {
         "which loses gamma, beta and the running statistics that test-time training needs; "
         "re-export with torch.onnx.export(..., training=torch.onnx.TrainingMode.TRAINING, "
         "do_constant_folding=False, opset_version=14)",
-        net.arch(), model_bn));
+        spec.arch, model_bn));
 
   // 3. By name: graph layers whose stored tensors carry the network's state names.
   std::map<std::string, std::pair<size_t, std::string>> by_state;  // state name -> (layer, role)
@@ -521,15 +563,14 @@ OnnxConversionReport load_onnx_weights(const OnnxModel& model, DepthNet& net) {
     for (size_t i = 0; i < problems.size() && i < kMaxListed; ++i) list += "\n  - " + problems[i];
     if (problems.size() > kMaxListed)
       list += fmt::format("\n  ... and {} more", problems.size() - kMaxListed);
-    fail(unsupported.empty() ? ErrorCategory::format : ErrorCategory::unsupported,
-         "{}: cannot convert to {} ({} problem{}):{}", file, net.arch(), problems.size(),
+    fail(refused_as_unsupported ? ErrorCategory::unsupported : ErrorCategory::format,
+         "{}: cannot convert to {} ({} problem{}):{}", file, spec.arch, problems.size(),
          problems.size() == 1 ? "" : "s", list);
   }
   const LoadStateReport loaded = net.load_state(state, /*strict=*/false);
   CVD_ASSERT(loaded.unexpected.empty());
   report.tensors = loaded.loaded;
   report.layers = report.by_name + report.by_structure;
-  resize_warnings(model, net, report);
   return report;
 }
 

@@ -15,8 +15,14 @@
 //
 // A file that cannot be converted is refused with ONE Error that lists every unsupported op type
 // (with counts) and every unmatched or mismatched tensor.
+//
+// Weights shared by several nodes (FlowNetC runs conv1..conv3 on both images) are one layer: a
+// weight layer whose stored tensors are exactly those of an earlier one is not matched again.
+// Networks other than DepthNets (FlowNet2: models/onnx_flownet2.h) describe themselves with an
+// OnnxNetworkSpec, which also accepts and checks their custom-domain ops.
 #pragma once
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <memory>
 #include <set>
@@ -37,6 +43,21 @@ struct OnnxConversionReport {
   std::vector<std::string> unused_in_forward;
   std::vector<std::string> warnings;     // e.g. Resize modes that differ from the network's
   std::map<std::string, int> op_counts;  // op type -> nodes
+  size_t shared_uses = 0;                // weight nodes reusing an earlier layer's tensors
+};
+
+// What the converter needs to know about a network besides its modules.
+struct OnnxNetworkSpec {
+  std::string arch;  // for messages
+  // Module prefixes in the order the graph runs them (DepthNet::execution_order semantics).
+  std::vector<std::string> execution_order{""};
+  // The custom-domain ops (domain, op type) the network implements; others are unsupported.
+  std::set<std::pair<std::string, std::string>> custom_ops;
+  // Checks the graph's network-specific nodes (e.g. custom-op attributes): each problem is a
+  // message naming the node; they make the conversion fail as unsupported.
+  std::function<void(const OnnxModel&, std::vector<std::string>& problems,
+                     OnnxConversionReport& report)>
+      check_graph;
 };
 
 // The standard (default-domain) op types the converter accepts.
@@ -46,6 +67,10 @@ const std::set<std::string>& onnx_supported_ops();
 // graph has unsupported ops, Error(format) when its weights do not match the network; the one
 // message names the file and lists every problem.
 OnnxConversionReport load_onnx_weights(const OnnxModel& model, DepthNet& net);
+
+// The same for any network described by `spec`.
+OnnxConversionReport load_onnx_weights(const OnnxModel& model, Module& net,
+                                       const OnnxNetworkSpec& spec);
 
 struct OnnxConversion {
   std::unique_ptr<DepthNet> net;

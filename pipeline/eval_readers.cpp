@@ -111,15 +111,15 @@ static std::optional<Intrinsics> read_optional_intrinsics(const fs::path& dir) {
   return k;
 }
 
-EvalSequence read_cvd_run(const fs::path& dir) {
+EvalSequence read_cvd_run(const fs::path& dir, const std::string& depth_subdir) {
   if (!fs::is_directory(dir)) fail(ErrorCategory::io, "{}: run directory not found", dir.string());
   EvalSequence seq;
   seq.root = dir;
   seq.layout = "cvd-run";
-  auto depths = list_files(dir / "depth", {".pfm"});
+  auto depths = list_files(dir / depth_subdir, {".pfm"});
   if (depths.empty())
-    fail(ErrorCategory::format, "{}: no depth/*.pfm files (not a cvd run directory?)",
-         dir.string());
+    fail(ErrorCategory::format, "{}: no {}/*.pfm files (not a cvd run directory?)",
+         dir.string(), depth_subdir);
   std::map<std::string, fs::path> by_name;
   for (auto& p : depths) by_name[p.stem().string()] = p;
   std::vector<std::pair<std::string, std::optional<double>>> order;

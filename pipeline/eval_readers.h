@@ -53,8 +53,9 @@ struct EvalSequence {
   bool has_images() const;  // every frame has an image
 };
 
-// A cvd run directory (prediction).
-EvalSequence read_cvd_run(const std::filesystem::path& dir);
+// A cvd run directory (prediction); depth maps from dir/depth_subdir/*.pfm.
+EvalSequence read_cvd_run(const std::filesystem::path& dir,
+                          const std::string& depth_subdir = "depth");
 
 // Ground truth; auto_detect picks demo (poses.txt + depth/*.pfm + rgb/), tum (associations.txt
 // or depth.txt), else pfm. `png_depth_scale` is the TUM depth unit in metres (1/1000 default;

@@ -11,6 +11,7 @@
 #include "engine/error.h"
 #include "pipeline/atomic_file.h"
 #include "pipeline/eval_pose_metrics.h"
+#include "pipeline/eval_sparse.h"
 #include "pipeline/image_io.h"
 
 namespace fs = std::filesystem;
@@ -82,6 +83,17 @@ static void evaluate_depth(const EvalSequence& pred, const EvalSequence& gt,
       depth[depth_alignment_name(a)][depth_space_name(s)] =
           errors_json(evaluate_video_depth(ps, gs, a, s, opt.depth));
   out.metrics["depth"] = depth;
+  // The run's sparse points (SfM or flow-triangulated) on the same GT, when the run kept them.
+  const fs::path sparse_csv = opt.pred_dir / "sparse_depth.csv";
+  if (fs::exists(sparse_csv)) {
+    std::vector<std::string> names;
+    for (auto& m : matches) names.push_back(pred.frames[m.pred].name);
+    SparseDepthEval se = evaluate_sparse_depth(read_sparse_depth_csv(sparse_csv), names, gs,
+                                               opt.depth.min_depth, opt.depth.max_depth);
+    out.metrics["sparse"] = {{"frames", se.frames},   {"points", se.points},
+                             {"density", se.density}, {"abs_rel", se.abs_rel},
+                             {"abs_rel_video", se.abs_rel_video}, {"delta1", se.delta1}};
+  }
   // Thumbnails: the prediction scaled by the one video scale, so it shares the GT's colours.
   double video_scale = depth["median_video"]["depth"]["scales"].empty()
                            ? 1.0
@@ -201,7 +213,7 @@ static void evaluate_consistency(const EvalSequence& pred, const std::optional<I
 
 EvalOutcome evaluate_run(const EvalRunOptions& opt) {
   EvalOutcome out;
-  EvalSequence pred = read_cvd_run(opt.pred_dir);
+  EvalSequence pred = read_cvd_run(opt.pred_dir, opt.depth_subdir);
   if (!opt.frames_dir.empty()) {
     if (!fs::is_directory(opt.frames_dir))
       fail(ErrorCategory::io, "{}: frames directory not found", opt.frames_dir.string());
@@ -211,6 +223,7 @@ EvalOutcome evaluate_run(const EvalRunOptions& opt) {
   m["pred"] = opt.pred_dir.string();
   m["gt"] = opt.gt_dir.empty() ? json(nullptr) : json(opt.gt_dir.string());
   m["notes"] = json::array();
+  m["depth_dir"] = opt.depth_subdir;
   m["options"] = {{"min_depth", opt.depth.min_depth},
                   {"max_depth", opt.depth.max_depth},
                   {"png_depth_scale", opt.png_depth_scale},

@@ -3,12 +3,14 @@
 // eval_depth_metrics.h, eval_pose_metrics.h and eval_consistency.h.
 //
 // metrics.json layout (absent sections were not computable; "notes" says why):
-//   pred, gt (path or null), gt_layout, frames {pred, gt, matched}, options {...},
+//   pred, depth_dir, gt (path or null), gt_layout, frames {pred, gt, matched}, options {...},
 //   depth {<alignment>: {<space>: {abs_rel, sq_rel, rmse, rmse_log, delta1..3, frames,
 //          skipped_frames, per_frame_abs_rel[], scales[], shifts[], sorted_abs_rel[]}}},
 //   pose {ate_rmse, ate_mean, ate_median, ate_max, frames, sim3 {scale, R[9] row-major, t[3]},
 //         ate_per_frame[], rpe [{delta, trans_rmse, trans_mean, rot_mean_deg, rot_rmse_deg,
 //         pairs}], trajectory {gt [[x,y,z]], est_aligned [[x,y,z]]}},
+//   sparse {frames, points, density, abs_rel, abs_rel_video, delta1} (the run's sparse_depth.csv
+//          on the GT; see eval_sparse.h),
 //   consistency {instability, drift, instability_centroid, drift_eigen_ratio, tracks, klt_tracks,
 //                flow_reprojection_px, flow_pairs, per_pair_px[]} or {skipped: reason},
 //   notes [strings]
@@ -27,6 +29,7 @@ namespace cvd {
 
 struct EvalRunOptions {
   std::filesystem::path pred_dir;
+  std::string depth_subdir = "depth";  // "depth_initial": the network before test-time training
   std::filesystem::path gt_dir;      // empty: no ground truth (consistency metrics only)
   std::filesystem::path frames_dir;  // RGB frames by stem; empty: from the run or the GT
   GtFormat gt_format = GtFormat::auto_detect;

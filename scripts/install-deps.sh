@@ -12,7 +12,7 @@ pkgs=(
   libeigen3-dev libopencv-dev libopencv-contrib-dev libceres-dev colmap
   libdnnl-dev ocl-icd-opencl-dev libgtest-dev libgmock-dev libbenchmark-dev
   ffmpeg libcli11-dev nlohmann-json3-dev libspdlog-dev libfmt-dev
-  libonnx-dev libprotobuf-dev protobuf-compiler zlib1g-dev doxygen clang chromium
+  libonnx-dev libprotobuf-dev protobuf-compiler zlib1g-dev doxygen clang chromium jq
 )
 if [ "${CVD_WITH_PYTHON:-0}" = "1" ]; then
   pkgs+=(python3-torch python3-torchvision python3-onnx python3-numpy)

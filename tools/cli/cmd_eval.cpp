@@ -11,13 +11,14 @@ namespace cvd::cli {
 namespace {
 
 struct EvalArgs {
-  std::string pred, gt, frames, out, format = "auto";
+  std::string pred, gt, frames, out, format = "auto", depth_dir = "depth";
   double max_depth = 0, min_depth = 1e-3, png_depth_scale = 1e-3;
 };
 
 void run_eval(const EvalArgs& a) {
   EvalRunOptions opt;
   opt.pred_dir = a.pred;
+  opt.depth_subdir = a.depth_dir;
   opt.gt_dir = a.gt;
   opt.frames_dir = a.frames;
   opt.gt_format = parse_gt_format(a.format);
@@ -34,6 +35,10 @@ void run_eval(const EvalArgs& a) {
                  m["depth"]["median_frame"]["depth"]["abs_rel"].get<double>(),
                  m["depth"]["median_frame"]["depth"]["rmse"].get<double>(),
                  m["depth"]["median_frame"]["depth"]["delta1"].get<double>());
+  if (m.contains("sparse"))
+    spdlog::info("sparse points: {} on {} frames, density {:.4f}, AbsRel {:.4f} (median per frame)",
+                 m["sparse"]["points"].get<int64_t>(), m["sparse"]["frames"].get<int>(),
+                 m["sparse"]["density"].get<double>(), m["sparse"]["abs_rel"].get<double>());
   if (m.contains("pose"))
     spdlog::info("poses: ATE RMSE {:.4f} after Sim(3) alignment over {} frames",
                  m["pose"]["ate_rmse"].get<double>(), m["pose"]["frames"].get<int>());
@@ -62,6 +67,11 @@ CommandRegistration reg(40, [](CLI::App& app) {
   sub->add_option("--frames", args->frames,
                   "RGB frames named like the run's frames (default: the run's or the GT's)")
       ->check(CLI::ExistingDirectory);
+  sub->add_option("--depth-dir", args->depth_dir,
+                  "depth folder of the run to evaluate: depth, or depth_initial (the network "
+                  "before test-time training)")
+      ->check(CLI::IsMember({"depth", "depth_initial"}))
+      ->capture_default_str();
   sub->add_option("--out", args->out, "output directory (default RUN_DIR/eval)");
   sub->add_option("--max-depth", args->max_depth, "ignore GT depth >= M (0: no cap)")
       ->check(CLI::NonNegativeNumber)

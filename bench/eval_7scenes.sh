@@ -24,7 +24,7 @@ command -v jq >/dev/null || { echo "eval_7scenes.sh: needs jq (apt-get install j
 FRAMES="${FRAMES:-40}" FRAME_STEP="${FRAME_STEP:-1}" DEPTH_SIZE="${DEPTH_SIZE:-192}"
 WIDTH="${WIDTH:-0.125}" EPOCHS="${EPOCHS:-4}" WARMUP="${WARMUP:-60}" POSES="${POSES:-gt colmap}"
 common=(--max-frames "$FRAMES" --frame-step "$FRAME_STEP" --depth-size "$DEPTH_SIZE"
-  --epochs "$EPOCHS" --intrinsics 525,525,320,240 --gt "$data" --no-videos --quiet)
+  --epochs "$EPOCHS" --intrinsics 525,525,320,240 --gt "$data" --no-videos)
 if [[ -n "${MODEL:-}" ]]; then
   common+=(--model "$MODEL" --arch "${ARCH:?ARCH must name the architecture of MODEL}")
 else
@@ -44,7 +44,7 @@ for poses in $POSES; do
     continue
   fi
   start=$(date +%s)
-  "$cvd" run "$data/rgb" -o "$run" "${common[@]}" "${extra[@]}" >"$out/$poses.log" 2>&1 ||
+  "$cvd" --quiet run "$data/rgb" -o "$run" "${common[@]}" "${extra[@]}" >"$out/$poses.log" 2>&1 ||
     { echo "eval_7scenes: cvd run ($poses poses) failed; see $out/$poses.log" >&2; tail -5 "$out/$poses.log" >&2; exit 1; }
   secs=$(($(date +%s) - start))
   "$cvd" eval --pred "$run" --gt "$data" --depth-dir depth_initial --out "$run/eval_initial" \

@@ -1,6 +1,10 @@
 // `cvd run INPUT -o OUT`: the whole pipeline on a video or a folder of frames.
 #include <fmt/format.h>
 
+#include <spdlog/spdlog.h>
+
+#include "engine/error.h"
+#include "pipeline/eval_run.h"
 #include "pipeline/run_pipeline.h"
 #include "tools/cli/command.h"
 #include "tools/cli/progress_bar.h"
@@ -14,15 +18,33 @@ struct RunCommand {
   RunFlagStrings s;
 };
 
-void print_summary(const RunResult& r, const std::filesystem::path& out) {
+void print_summary(const RunResult& r, const RunOptions& o) {
   int reg = 0;
   for (auto& c : r.cameras) reg += c.registered;
   fmt::print("cvd run: {} frames ({} with poses), {} pairs ({} dropped)\n", r.frame_names.size(),
              reg, r.num_pairs, r.num_pairs_dropped);
   fmt::print("geometric loss: {:.4f} before training -> {:.4f} after\n", r.initial_loss, r.final_loss);
-  fmt::print("outputs in {}: depth/ depth_png16/ depth_color/ poses.txt colmap/ intrinsics.json "
-             "points.ply depth.mp4 side_by_side.mp4 run.json\n",
-             out.string());
+  fmt::print("outputs in {}: depth/ depth_initial/ depth_png16/ depth_color/ poses.txt colmap/ "
+             "intrinsics.json sparse_depth.csv{}{} run.json\n",
+             o.out.string(), o.write_point_cloud ? " points.ply" : "",
+             o.write_videos ? " depth.mp4 side_by_side.mp4" : "");
+}
+
+// --gt: the run's outputs scored against the ground truth, as `cvd eval --pred OUT --gt GT`
+// would (OUT/eval/metrics.json and report.html).
+void evaluate_against_ground_truth(const RunOptions& o) {
+  EvalRunOptions eo;
+  eo.pred_dir = o.out;
+  eo.gt_dir = o.gt;
+  EvalOutcome r = evaluate_run(eo);
+  write_eval_outputs(o.out / "eval", r);
+  const auto& m = r.metrics;
+  if (m.contains("depth") && m["depth"].contains("median_frame"))
+    fmt::print("vs ground truth: AbsRel {:.4f} (median per frame), {:.4f} (one scale per video)\n",
+               m["depth"]["median_frame"]["depth"]["abs_rel"].get<double>(),
+               m["depth"]["median_video"]["depth"]["abs_rel"].get<double>());
+  for (auto& n : m["notes"]) spdlog::warn("{}", n.get<std::string>());
+  fmt::print("evaluation in {}\n", (o.out / "eval").string());
 }
 
 const CommandRegistration reg(20, [](CLI::App& app) {
@@ -34,11 +56,15 @@ const CommandRegistration reg(20, [](CLI::App& app) {
   c->callback([st] {
     configure_logging();
     apply_flag_strings(st->s, st->o);
+    if (!st->o.gt.empty() && !std::filesystem::is_directory(st->o.gt))
+      fail(ErrorCategory::invalid_argument, "--gt {}: ground-truth directory not found",
+           st->o.gt.string());
     ProgressBar bar(global_options().quiet);
     st->o.progress = [&](const RunProgress& p) { bar.update(p); };
     RunResult r = run_pipeline(st->o);
     bar.finish();
-    print_summary(r, st->o.out);
+    print_summary(r, st->o);
+    if (!st->o.gt.empty()) evaluate_against_ground_truth(st->o);
   });
 });
 

@@ -133,7 +133,7 @@ class WireReader {
       if (v.size() % 4) corrupt(fmt::format("packed '{}' of {} bytes", field, v.size()));
       const size_t n0 = out.size();
       out.resize(n0 + v.size() / 4);
-      std::memcpy(out.data() + n0, v.data(), v.size());
+      if (!v.empty()) std::memcpy(out.data() + n0, v.data(), v.size());  // no null memcpy
     } else {
       corrupt(fmt::format("field '{}' has wire type {}", field, wire));
     }
@@ -149,7 +149,7 @@ class WireReader {
       if (v.size() % 8) corrupt(fmt::format("packed '{}' of {} bytes", field, v.size()));
       const size_t n0 = out.size();
       out.resize(n0 + v.size() / 8);
-      std::memcpy(out.data() + n0, v.data(), v.size());
+      if (!v.empty()) std::memcpy(out.data() + n0, v.data(), v.size());  // no null memcpy
     } else {
       corrupt(fmt::format("field '{}' has wire type {}", field, wire));
     }
@@ -314,7 +314,9 @@ OnnxTensor read_tensor(WireReader r) {
     }
     t.values = Tensor::empty(Shape(t.dims.begin(), t.dims.end()), f32 ? DType::f32 : DType::f64);
     void* dst = t.values.data_ptr();
-    if (has_raw) {
+    if (n == 0) {
+      // An empty tensor: nothing to copy (and memcpy must not see null pointers).
+    } else if (has_raw) {
       std::memcpy(dst, raw.data(), raw.size());
     } else if (f32) {
       std::memcpy(dst, floats.data(), floats.size() * 4);

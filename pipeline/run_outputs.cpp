@@ -147,4 +147,23 @@ void write_videos(const fs::path& out, const RunOutputs& r) {
   if (!r.frames_bgr.empty()) write(out / "side_by_side.mp4", true);
 }
 
+const std::vector<std::string>& run_output_names() {
+  static const std::vector<std::string> names = {
+      "depth",     "depth_png16",      "depth_color",      "depth_initial",
+      "poses.txt", "colmap",           "intrinsics.json",  "points.ply",
+      "depth.mp4", "side_by_side.mp4", "sparse_depth.csv", "run.json"};
+  return names;
+}
+
+PartialOutputsGuard::~PartialOutputsGuard() {
+  if (committed_) return;
+  for (const auto& name : run_output_names()) {
+    std::error_code ec;
+    fs::remove_all(out_ / name, ec);
+    if (ec)
+      spdlog::warn("{}: cannot remove the partial output: {}", (out_ / name).string(),
+                   ec.message());
+  }
+}
+
 }  // namespace cvd

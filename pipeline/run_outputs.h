@@ -38,4 +38,23 @@ void write_videos(const std::filesystem::path& out, const RunOutputs& r);
 std::pair<double, double> video_inverse_depth_range(const std::vector<cv::Mat>& depths);
 cv::Mat colorize_depth(const cv::Mat& depth, std::pair<double, double> inv_range);
 
+// The names above (plus depth_initial/, sparse_depth.csv), which a run writes into `out`.
+const std::vector<std::string>& run_output_names();
+
+// Created before a run starts writing its outputs: unless commit() is called, its destructor
+// (run when a writer throws, e.g. on a full disk) removes every name of run_output_names() from
+// `out`, so a failed run leaves no partial results under the final names. The cache stays.
+class PartialOutputsGuard {
+ public:
+  explicit PartialOutputsGuard(std::filesystem::path out) : out_(std::move(out)) {}
+  PartialOutputsGuard(const PartialOutputsGuard&) = delete;
+  PartialOutputsGuard& operator=(const PartialOutputsGuard&) = delete;
+  ~PartialOutputsGuard();
+  void commit() { committed_ = true; }
+
+ private:
+  std::filesystem::path out_;
+  bool committed_ = false;
+};
+
 }  // namespace cvd

@@ -13,6 +13,7 @@
 #include "engine/module_weights.h"
 #include "engine/ops.h"
 #include "pipeline/atomic_file.h"
+#include "pipeline/eval_sparse.h"
 #include "pipeline/flow_triangulation.h"
 #include "pipeline/frame_source.h"
 #include "pipeline/pfm_io.h"
@@ -281,8 +282,9 @@ RunResult run_pipeline(const RunOptions& o) {
     fail(ErrorCategory::cancelled, "stopped after epoch {} (test hook)", tr.epoch_losses.size());
   res.final_loss = evaluate_geometric_loss(*net, load_frame, pairs, to.lambda_disparity);
 
-  // 8. Outputs
+  // 8. Outputs (a failure while writing them, e.g. a full disk, removes the partial ones)
   t = Clock::now();
+  PartialOutputsGuard partial_outputs(o.out);
   RunOutputs outs;
   outs.names = frames.names;
   outs.depths = infer_depths(*net, load_frame, n, o, "final depth");
@@ -297,6 +299,18 @@ RunResult run_pipeline(const RunOptions& o) {
   write_cameras(o.out, outs);
   if (o.write_point_cloud) write_point_cloud(o.out / "points.ply", outs);
   if (o.write_videos) write_videos(o.out, outs);
+  {
+    std::map<std::string, SparseDepthFrame> sd;
+    for (int k = 0; k < n; ++k) {
+      if (sparse[k].z.empty()) continue;
+      SparseDepthFrame& f = sd[frames.names[k]];
+      f.width = cams[k].intrinsics.width;
+      f.height = cams[k].intrinsics.height;
+      for (size_t q = 0; q < sparse[k].z.size(); ++q)
+        f.points.push_back({sparse[k].u[q], sparse[k].v[q], sparse[k].z[q]});
+    }
+    write_sparse_depth_csv(o.out / "sparse_depth.csv", sd);
+  }
   fs::create_directories(o.out / "depth_initial");
   for (int k = 0; k < n; ++k) write_pfm(o.out / "depth_initial" / (frames.names[k] + ".pfm"), initial[k]);
   timings["outputs"] = since(t);
@@ -323,6 +337,13 @@ RunResult run_pipeline(const RunOptions& o) {
                    {"intrinsics_depth_res", {cams[0].intrinsics.fx, cams[0].intrinsics.fy, cams[0].intrinsics.cx, cams[0].intrinsics.cy}},
                    {"details", poses.info}};
   info["calibration"] = calib;
+  {
+    int64_t count = 0;
+    for (auto& sp : sparse) count += static_cast<int64_t>(sp.z.size());
+    info["sparse_points"] = {{"source", have_sfm_points ? "sfm" : "flow triangulation"},
+                             {"observations", count},
+                             {"file", "sparse_depth.csv"}};
+  }
   info["pairs"] = {{"kept", res.num_pairs}, {"dropped", flow.dropped}};
   info["training"] = {{"epochs", o.epochs}, {"batch_pairs", to.batch_pairs}, {"lr", to.lr},
                       {"lambda", to.lambda_disparity}, {"seed", o.seed},
@@ -332,6 +353,7 @@ RunResult run_pipeline(const RunOptions& o) {
   info["timings_s"] = timings;
   res.run_info = info;
   write_text_file(o.out / "run.json", info.dump(2));
+  partial_outputs.commit();
   return res;
 }
 

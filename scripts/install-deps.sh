@@ -13,6 +13,9 @@ pkgs=(
   libdnnl-dev ocl-icd-opencl-dev libgtest-dev libgmock-dev libbenchmark-dev
   ffmpeg libcli11-dev nlohmann-json3-dev libspdlog-dev libfmt-dev
   libonnx-dev libprotobuf-dev protobuf-compiler zlib1g-dev doxygen clang chromium jq
+  # libFuzzer and clang's sanitizer runtimes (only recommended by clang, so not pulled in by
+  # --no-install-recommends): tests/fuzz/run_fuzzers.sh links -fsanitize=fuzzer against them.
+  libclang-rt-14-dev
 )
 if [ "${CVD_WITH_PYTHON:-0}" = "1" ]; then
   pkgs+=(python3-torch python3-torchvision python3-onnx python3-numpy)

@@ -4,6 +4,7 @@
 // are the smallest ones, so each case runs in about a second.
 #include <gtest/gtest.h>
 
+#include <unistd.h>
 #include <fstream>
 #include <functional>
 #include <opencv2/imgcodecs.hpp>
@@ -81,6 +82,37 @@ std::string tum_args(const TempDir& t) {
   write_text(t / "poses.txt", tum_lines(3));
   return " --poses " + q(t / "poses.txt") + " --poses-format tum " + kIntrinsics;
 }
+
+// A wrapper around the real `colmap` (POSIX sh; @REAL_COLMAP@ is replaced by its path): feature
+// extraction and matching run for real (cvd edits the database between mapper runs), but the
+// mapper writes a fake model (images.bin is only looked for, never read) and model_converter its
+// text form, registering the first two of the images cvd handed to COLMAP.
+const char* kFakeColmapTwoFrames = R"SH(#!/bin/sh
+cmd=$1
+case $cmd in
+  feature_extractor | *_matcher) exec "@REAL_COLMAP@" "$@" ;;
+esac
+shift
+out=
+in=
+while [ $# -gt 0 ]; do
+  case $1 in
+    --output_path) out=$2; shift ;;
+    --input_path) in=$2; shift ;;
+  esac
+  shift
+done
+case $cmd in
+  mapper) mkdir -p "$out/0" && echo fake > "$out/0/images.bin" ;;
+  model_converter)
+    set -- $(ls "$(dirname "$(dirname "$in")")/colmap_images" | head -n 2)
+    echo "1 PINHOLE 64 48 60 60 31.5 23.5" > "$out/cameras.txt"
+    printf '1 1 0 0 0 0 0 0 1 %s\n\n2 1 0 0 0 -0.05 0 0 1 %s\n\n' "$1" "$2" > "$out/images.txt"
+    : > "$out/points3D.txt"
+    ;;
+esac
+exit 0
+)SH";
 
 struct BadInputCase {
   std::string name;
@@ -294,6 +326,18 @@ std::vector<BadInputCase> cases() {
        3,
        {"onnx_shape_overflow.onnx", "impossibly large shape"},
        {"converted.cvdw"}},
+      {"onnx_fuzz_regression_empty_packed_floats",
+       [](const TempDir& t) {
+         // Found by tests/fuzz/fuzz_onnx under UBSan: an empty packed float_data field made the
+         // reader memcpy from a null pointer (undefined behaviour; the sanitizer build of this
+         // test catches a regression, the Release build checks the message).
+         return "convert " +
+                q(source_dir() / "tests/data/fuzz_regressions/onnx_empty_packed_floats.onnx") +
+                " --arch mannequin --width 0.0625 -o " + q(t / "converted.cvdw");
+       },
+       3,
+       {"onnx_empty_packed_floats.onnx: not a valid ONNX model", "at byte 787"},
+       {"converted.cvdw"}},
       {"colmap_failing",
        [](const TempDir& t) {
          fs::create_directories(t / "bin");
@@ -304,6 +348,26 @@ std::vector<BadInputCase> cases() {
        5,
        {"COLMAP feature_extractor failed with exit code 1", "$T/out/cache/colmap/work/colmap.log",
         "simulated COLMAP failure"},
+       {},
+       "PATH='$T/bin':\"$PATH\""},
+      {"colmap_registers_too_few_frames",
+       [](const TempDir& t) {
+         // A fake COLMAP whose mapper "registers" only the first 2 of 4 frames (3 are required:
+         // max(min_registered_frames 3, half of 4)); the relaxed retry gets the same model.
+         fs::create_directories(t / "bin");
+         std::string script = kFakeColmapTwoFrames;
+         std::string real = run_command("command -v colmap").output;
+         real.erase(real.find_last_not_of(" \n") + 1);
+         script.replace(script.find("@REAL_COLMAP@"), 13, real);
+         write_text(t / "bin/colmap", script);
+         fs::permissions(t / "bin/colmap", fs::perms::owner_all);
+         return run_args(t, write_frames(t / "frames", 4));
+       },
+       5,
+       {"COLMAP registered only 2 of 4 frames (at least 3 required)",
+        "unregistered: frame_0002, "
+        "frame_0003",
+        "$T/out/cache/colmap/work/colmap.log"},
        {},
        "PATH='$T/bin':\"$PATH\""},
       {"colmap_absent",
@@ -348,6 +412,89 @@ TEST_P(CliBadInput, ClearMessageExitCodeAndNoOutputs) {
 
 INSTANTIATE_TEST_SUITE_P(Cases, CliBadInput, ::testing::ValuesIn(cases()),
                          [](const auto& info) { return info.param.name; });
+
+// ---- Disk full ---------------------------------------------------------------------------------
+// A run whose stages are all cached (copied from a complete run) fails while writing its outputs:
+// on a tmpfs with 8 KiB free (ENOSPC; needs a mount namespace: root, or unprivileged user
+// namespaces) and under an 8 KiB file-size limit (EFBIG; works everywhere). Either way the first
+// output, depth/frame_0000.pfm (12 KiB), cannot be written: exit code 4, a message naming it, and
+// no partial output or temporary file left.
+class CliDiskFull : public ::testing::Test {
+ protected:
+  // One complete run, shared by the tests, whose cache each test copies.
+  static void SetUpTestSuite() {
+    shared_ = new TempDir();
+    frames_ = write_frames(*shared_ / "frames", 3);
+    CommandResult r = run_cvd(run_args(*shared_ / "complete"));
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+  }
+  static void TearDownTestSuite() {
+    delete shared_;
+    shared_ = nullptr;
+  }
+  static std::string run_args(const fs::path& out) {
+    return "run " + q(frames_) + " -o " + q(out) + " " + kFastFlags + tum_args(*shared_);
+  }
+  // Runs a shell script (through `launcher`) that runs `prologue` (which limits the disk), copies
+  // the complete run's cache into `out`, runs cvd there under `limit` and lists what is left.
+  CommandResult run_with_limited_disk(const std::string& launcher, const std::string& prologue,
+                                      const std::string& limit, const fs::path& out) const {
+    std::string script = prologue + "\nmkdir -p " + q(out) + " && cp -r " +
+                         q(*shared_ / "complete/cache") + " " + q(out / "cache") + " || exit 98\n" +
+                         "(trap '' XFSZ; " + limit + "exec " + cli_path() + " " + run_args(out) +
+                         ")\nrc=$?\n";
+    for (const char* name : kFinalOutputs)
+      script += "[ -e " + q(out / name) + " ] && echo 'LEFT: " + name + "'\n";
+    script += "find " + q(out) + " -name '.*tmp-*' -exec echo 'TEMPORARY: {}' ';'\nexit $rc\n";
+    write_text(t_ / "disk_full.sh", script);
+    return run_command(launcher + " sh " + q(t_ / "disk_full.sh"));
+  }
+  void expect_clean_io_failure(const CommandResult& r, const fs::path& out) const {
+    EXPECT_EQ(r.exit_code, 4) << r.output;
+    std::string pfm = (out / "depth/frame_0000.pfm").string();
+    EXPECT_NE(r.output.find("cvd: error: writing PFM file '" + pfm + "' failed"), std::string::npos)
+        << r.output;
+    EXPECT_NE(r.output.find("disk full"), std::string::npos) << r.output;
+    EXPECT_EQ(r.output.find("LEFT: "), std::string::npos) << r.output;
+    EXPECT_EQ(r.output.find("TEMPORARY: "), std::string::npos) << r.output;
+    EXPECT_EQ(r.output.find("internal error"), std::string::npos) << r.output;
+  }
+
+  TempDir t_;
+  static TempDir* shared_;
+  static fs::path frames_;
+};
+TempDir* CliDiskFull::shared_ = nullptr;
+fs::path CliDiskFull::frames_;
+
+TEST_F(CliDiskFull, FullTmpfsFailsCleanlyWithExitCode4) {
+  // Size the tmpfs to the cache (whole 4 KiB pages per file) plus 8 KiB.
+  uintmax_t kib = 8;
+  for (const auto& e : fs::recursive_directory_iterator(*shared_ / "complete/cache"))
+    if (e.is_regular_file()) kib += (e.file_size() + 4095) / 4096 * 4;
+  fs::path mnt = t_ / "small_disk";
+  fs::create_directories(mnt);
+  std::string prologue = "mount -t tmpfs -o size=" + std::to_string(kib) + "k cvd-test-tmpfs " +
+                         q(mnt) + " || exit 99";
+  // A private mount namespace: the tmpfs disappears with the shell.
+  std::string launcher = ::getuid() == 0 ? "unshare -m" : "unshare -rm";
+  CommandResult r = run_with_limited_disk(launcher, prologue, "", mnt / "out");
+  if (r.exit_code == 99 || r.output.find("unshare: ") != std::string::npos)
+    GTEST_SKIP() << "cannot mount a tmpfs in a private mount namespace here:\n" << r.output;
+  expect_clean_io_failure(r, mnt / "out");
+  if (size_t p = r.output.rfind("cvd: error: "); p != std::string::npos)
+    std::printf("[bad-input] disk_full_tmpfs | exit %d | %s\n", r.exit_code,
+                r.output.substr(p, r.output.find('\n', p) - p).c_str());
+}
+
+TEST_F(CliDiskFull, FileSizeLimitFailsCleanlyWithExitCode4) {
+  // 16 blocks of 512 bytes (POSIX sh); SIGXFSZ is ignored, so write() fails with EFBIG.
+  CommandResult r = run_with_limited_disk("", "", "ulimit -f 16; ", t_ / "limited/out");
+  expect_clean_io_failure(r, t_ / "limited/out");
+  if (size_t p = r.output.rfind("cvd: error: "); p != std::string::npos)
+    std::printf("[bad-input] file_size_limit | exit %d | %s\n", r.exit_code,
+                r.output.substr(p, r.output.find('\n', p) - p).c_str());
+}
 
 }  // namespace
 }  // namespace cvd::test

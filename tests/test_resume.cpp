@@ -2,6 +2,9 @@
 // (`cvd scene`, 6 frames of 128x96 with its TUM poses and intrinsics):
 //  * a run killed with SIGKILL during training, then rerun, resumes from the last epoch
 //    checkpoint and writes the same depth maps as an uninterrupted run;
+//  * a run killed with SIGKILL during the flow stage (a larger 10-frame 640x480 clip, so the
+//    stage lasts seconds), then rerun, keeps the flow pairs already done and writes the same flow
+//    and depth as an uninterrupted run;
 //  * NaN losses injected with CVD_FAULT_NAN_LOSS_STEPS are skipped and counted in run.json, and a
 //    run whose every loss is NaN ends with exit code 6 and a clear message.
 #include <gtest/gtest.h>
@@ -12,6 +15,7 @@
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <thread>
 
@@ -158,6 +162,114 @@ TEST_F(TinyClip, KilledDuringTrainingResumesToTheSameDepth) {
   EXPECT_EQ(files, 6);
   EXPECT_LE(worst, 1e-5) << "largest relative depth difference resumed vs uninterrupted";
   std::printf("[resume] %d depth maps, largest relative difference %.3g\n", files, worst);
+}
+
+// Flow pairs finished in `out`: each pair's .json is written last (atomically).
+std::map<std::string, fs::file_time_type> finished_flow_pairs(const fs::path& out) {
+  std::map<std::string, fs::file_time_type> done;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(out / "cache" / "flow", ec))
+    if (e.path().extension() == ".json") done[e.path().filename().string()] = e.last_write_time();
+  return done;
+}
+
+class FlowClip : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new TempDir();
+    CommandResult r = run_cvd("scene --out " + q(dir_->path() / "scene") +
+                              " --frames 10 --width 640 --height 480");
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+  }
+  static void TearDownTestSuite() {
+    delete dir_;
+    dir_ = nullptr;
+  }
+  static fs::path work() { return dir_->path(); }
+  // One epoch on the smallest network; flow at the full 640x480, which dominates the run time.
+  static std::string run_args(const fs::path& out) {
+    fs::path scene = work() / "scene";
+    json k = read_json(scene / "intrinsics.json");
+    char intr[160];
+    std::snprintf(intr, sizeof intr, "%.17g,%.17g,%.17g,%.17g", k["fx"].get<double>(),
+                  k["fy"].get<double>(), k["cx"].get<double>(), k["cy"].get<double>());
+    return "run " + q(scene / "rgb") + " -o " + q(out) +
+           " --epochs 1 --warmup 1 --width 0.0625 --depth-size 64 --no-videos --no-ply --poses " +
+           q(scene / "poses.txt") + " --poses-format tum --intrinsics " + intr;
+  }
+
+ private:
+  static TempDir* dir_;
+};
+TempDir* FlowClip::dir_ = nullptr;
+
+TEST_F(FlowClip, KilledDuringFlowResumesToTheSameFlowAndDepth) {
+  fs::path ref = work() / "uninterrupted";
+  CommandResult r = run_cvd(run_args(ref));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const size_t total = finished_flow_pairs(ref).size();
+  ASSERT_GE(total, 10u);
+
+  // Killed with SIGKILL once 2 flow pairs are finished.
+  fs::path out = work() / "killed";
+  pid_t pid = spawn_cvd(run_args(out), work() / "killed.log");
+  ASSERT_GT(pid, 0);
+  int status = 0;
+  bool exited = false;
+  auto t0 = std::chrono::steady_clock::now();
+  while (finished_flow_pairs(out).size() < 2) {
+    if (waitpid(pid, &status, WNOHANG) == pid) {
+      exited = true;
+      break;
+    }
+    ASSERT_LT(std::chrono::steady_clock::now() - t0, std::chrono::minutes(10)) << "no flow pair";
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ASSERT_FALSE(exited) << "cvd finished before it could be killed:\n"
+                       << slurp(work() / "killed.log");
+  kill(pid, SIGKILL);
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL) << slurp(work() / "killed.log");
+  auto before = finished_flow_pairs(out);
+  ASSERT_LT(before.size(), total) << "the flow stage was over before the kill";
+  EXPECT_FALSE(fs::exists(out / "cache" / "training" / "checkpoint.json"));
+  EXPECT_FALSE(fs::exists(out / "run.json"));
+  EXPECT_FALSE(fs::exists(out / "depth"));
+
+  // Rerun: the finished pairs are kept (not recomputed), the rest computed, the run completes.
+  r = run_cvd(run_args(out));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  auto after = finished_flow_pairs(out);
+  EXPECT_EQ(after.size(), total);
+  for (const auto& [name, time] : before) {
+    ASSERT_TRUE(after.count(name)) << name;
+    EXPECT_EQ(after[name], time) << name << " was recomputed instead of resumed";
+  }
+  // Flow files byte-identical to the uninterrupted run's (DIS is deterministic).
+  int flows = 0;
+  for (const auto& e : fs::directory_iterator(ref / "cache" / "flow")) {
+    if (e.path().extension() != ".flo") continue;
+    EXPECT_EQ(slurp(e.path()), slurp(out / "cache" / "flow" / e.path().filename()))
+        << e.path().filename();
+    ++flows;
+  }
+  EXPECT_GE(flows, 2);
+  json a = read_json(ref / "run.json"), b = read_json(out / "run.json");
+  EXPECT_EQ(a["pairs"], b["pairs"]);
+  // Same tolerance as the training case (measured: identical).
+  auto la = a["training"]["epoch_losses"].get<std::vector<double>>();
+  auto lb = b["training"]["epoch_losses"].get<std::vector<double>>();
+  ASSERT_EQ(la.size(), 1u);
+  ASSERT_EQ(lb.size(), 1u);
+  EXPECT_NEAR(lb[0], la[0], 1e-5 * std::abs(la[0]));
+  int files = 0;
+  double worst = max_relative_depth_difference(ref, out, files);
+  EXPECT_EQ(files, 10);
+  EXPECT_LE(worst, 1e-5) << "largest relative depth difference resumed vs uninterrupted";
+  std::printf(
+      "[resume-flow] killed after %zu of %zu pairs; %d flow files, %d depth maps, largest "
+      "relative depth difference %.3g\n",
+      before.size(), total, flows, files, worst);
 }
 
 TEST_F(TinyClip, InjectedNanLossStepsAreSkippedAndCounted) {

@@ -8,14 +8,14 @@
 //   ours           the default dispatch path;
 //   raw            the oneDNN primitive alone;
 //   ours_nowcache  ours with the reordered-weight cache off (weights reordered on every call);
-//   ours_nochunk   ours without batch chunking (whole-batch reorders; non-depthwise shapes);
-//   ours_nchw      ours with oneDNN computing on NCHW directly (no reorders; usually GEMM based);
+//   ours_nochunk   ours without batch chunking (whole-batch reorders; oneDNN convolutions only);
 //   ours_onednn    depthwise shapes on oneDNN primitives + reorders instead of the hand-written
 //                  NCHW kernel.
 // bench/compare_conv.sh runs it and prints the table "shape pass ours raw ratio".
 #include <benchmark/benchmark.h>
 #include <oneapi/dnnl/dnnl.hpp>
 
+#include <cstdlib>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -76,32 +76,42 @@ void set_flops(benchmark::State& state, const ConvShape& s) {
 
 // ---- Ours: through dispatch() on NCHW tensors ------------------------------------------------
 
-enum class Variant { ours, ours_nowcache, ours_nochunk, ours_onednn, ours_nchw };
+enum class Variant { ours, ours_nowcache, ours_nochunk, ours_onednn };
 const char* variant_name(Variant v) {
   switch (v) {
-    case Variant::ours: return "ours";
-    case Variant::ours_nowcache: return "ours_nowcache";
-    case Variant::ours_nochunk: return "ours_nochunk";
-    case Variant::ours_onednn: return "ours_onednn";
-    case Variant::ours_nchw: return "ours_nchw";
+    case Variant::ours:
+      return "ours";
+    case Variant::ours_nowcache:
+      return "ours_nowcache";
+    case Variant::ours_nochunk:
+      return "ours_nochunk";
+    case Variant::ours_onednn:
+      return "ours_onednn";
   }
   return "";
+}
+
+// CVD_BENCH_CHUNK_MB overrides the default chunk budget of the plain "ours" variant (tuning).
+size_t ours_chunk_budget() {
+  static const size_t bytes = [] {
+    const char* mb = std::getenv("CVD_BENCH_CHUNK_MB");
+    return mb ? static_cast<size_t>(std::atof(mb) * (1 << 20)) : size_t{0};
+  }();
+  return bytes;
 }
 
 // Applies a variant's tuning overrides for its lifetime.
 struct VariantScope {
   explicit VariantScope(Variant v) {
     onednn::set_weight_cache_enabled(v != Variant::ours_nowcache);
-    onednn::set_conv_chunk_budget_override(v == Variant::ours_nochunk ? size_t{1} << 40 : 0);
+    onednn::set_conv_chunk_budget_override(v == Variant::ours_nochunk ? size_t{1} << 40
+                                                                      : ours_chunk_budget());
     onednn::set_depthwise_kernel_override(v == Variant::ours_onednn ? 0 : -1);
-    onednn::set_conv_layout_override(
-        v == Variant::ours_nchw ? static_cast<int>(onednn::ActivationLayout::nchw) : -1);
   }
   ~VariantScope() {
     onednn::set_weight_cache_enabled(true);
     onednn::set_conv_chunk_budget_override(0);
     onednn::set_depthwise_kernel_override(-1);
-    onednn::set_conv_layout_override(-1);
   }
 };
 
@@ -160,9 +170,9 @@ void run_raw(benchmark::State& state, const ConvShape& s, Pass pass) {
   dnnl::stream& strm = onednn::cpu_stream();
   const memory::dims src_dims = {s.n, s.c, s.h, s.w}, dst_dims = {s.n, s.o, s.oh(), s.ow()};
   const bool grouped = s.p.groups > 1;
-  const memory::dims w_dims = grouped ? memory::dims{s.p.groups, s.o / s.p.groups,
-                                                     s.c / s.p.groups, s.k, s.k}
-                                      : memory::dims{s.o, s.c, s.k, s.k};
+  const memory::dims w_dims =
+      grouped ? memory::dims{s.p.groups, s.o / s.p.groups, s.c / s.p.groups, s.k, s.k}
+              : memory::dims{s.o, s.c, s.k, s.k};
   const tag w_plain = grouped ? tag::goihw : tag::oihw;
   const auto any = [](const memory::dims& d) {
     return memory::desc(d, memory::data_type::f32, tag::any);
@@ -172,10 +182,9 @@ void run_raw(benchmark::State& state, const ConvShape& s, Pass pass) {
   const memory::dims pad_l = {s.p.pad_top, s.p.pad_left};
   const memory::dims pad_r = {s.p.pad_bottom, s.p.pad_right};
   dnnl::convolution_forward::primitive_desc fwd(
-      dnnl::convolution_forward::desc(dnnl::prop_kind::forward_training,
-                                      dnnl::algorithm::convolution_direct, any(src_dims),
-                                      any(w_dims), bias_md, any(dst_dims), strides, dil, pad_l,
-                                      pad_r),
+      dnnl::convolution_forward::desc(
+          dnnl::prop_kind::forward_training, dnnl::algorithm::convolution_direct, any(src_dims),
+          any(w_dims), bias_md, any(dst_dims), strides, dil, pad_l, pad_r),
       eng);
   dnnl::primitive prim;
   std::string impl;
@@ -191,9 +200,9 @@ void run_raw(benchmark::State& state, const ConvShape& s, Pass pass) {
       break;
     case Pass::bwd_data: {
       dnnl::convolution_backward_data::primitive_desc pd(
-          dnnl::convolution_backward_data::desc(dnnl::algorithm::convolution_direct,
-                                                any(src_dims), any(w_dims), any(dst_dims),
-                                                strides, dil, pad_l, pad_r),
+          dnnl::convolution_backward_data::desc(dnnl::algorithm::convolution_direct, any(src_dims),
+                                                any(w_dims), any(dst_dims), strides, dil, pad_l,
+                                                pad_r),
           eng, fwd);
       prim = dnnl::convolution_backward_data(pd);
       impl = pd.impl_info_str();
@@ -238,9 +247,11 @@ void register_all() {
           ->UseRealTime();
       std::vector<Variant> variants = {Variant::ours};
       if (depthwise) variants.push_back(Variant::ours_onednn);
-      if (!depthwise) variants.push_back(Variant::ours_nochunk);
-      if (!depthwise) variants.push_back(Variant::ours_nchw);
-      if (!depthwise && pass != Pass::bwd_weight) variants.push_back(Variant::ours_nowcache);
+      // Chunking and the weight cache only concern oneDNN convolutions (not the depthwise
+      // kernel, nor pointwise ones, which run as matmuls on NCHW).
+      const bool convolution = !depthwise && s.k > 1;
+      if (convolution) variants.push_back(Variant::ours_nochunk);
+      if (convolution && pass != Pass::bwd_weight) variants.push_back(Variant::ours_nowcache);
       for (Variant v : variants) {
         benchmark::RegisterBenchmark(
             (std::string("conv/") + variant_name(v) + "/" + tail).c_str(),

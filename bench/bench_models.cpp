@@ -6,6 +6,8 @@
 //   bench_models --arch midas_v2 --mode train --batch 8 --height 224 --width 384
 //                [--iters 1] [--warmup 1] [--weights file.cvdw] [--save-weights file.cvdw]
 //                [--gmac G] [--peak-gflops P]
+// With CVD_PROFILE=1 it also prints (stderr) the kernel time per op family and op of the timed
+// iterations (engine/op_profiler.h).
 // Prints one JSON line: seconds per iteration, peak RSS, GFLOP/s and MFU against --peak-gflops
 // (default: 2 cores x 2.0 GHz x 64 f32 FLOP/cycle (AVX-512, two FMA ports) = 256 GFLOP/s).
 // --gmac is the forward multiply-accumulates per image at this size; without it the MODELS.md
@@ -23,6 +25,7 @@
 #include "engine/autograd.h"
 #include "engine/cvdw.h"
 #include "engine/module_weights.h"
+#include "engine/op_profiler.h"
 #include "engine/ops.h"
 #include "models/depth_net.h"
 #include "models/depth_net_state.h"
@@ -122,11 +125,18 @@ int main(int argc, char** argv) {
       return loss.item();
     };
     for (int i = 0; i < a.warmup; ++i) step();
+    cvd::op_profiler::reset();  // with CVD_PROFILE=1: profile the timed iterations only
     const auto t0 = std::chrono::steady_clock::now();
     double check = 0;
     for (int i = 0; i < a.iters; ++i) check += step();
-    const double sec =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() / a.iters;
+    const double wall =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const double sec = wall / a.iters;
+    if (cvd::op_profiler::enabled()) {
+      std::cerr << a.arch << " " << a.mode << " x" << a.iters << ":\n"
+                << cvd::op_profiler::report(wall);
+      cvd::op_profiler::reset();
+    }
     const double gmac = a.gmac > 0 ? a.gmac : table_gmac(a.arch, a.height, a.width);
     const double gflop = 2.0 * gmac * a.batch * (a.mode == "train" ? 3.0 : 1.0);
     const double gflops = gflop / sec;

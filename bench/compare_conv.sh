@@ -16,7 +16,10 @@ bin="${1:-$here/../build/bench/bench_conv}"
 command -v jq >/dev/null || { echo "compare_conv.sh: jq is required to read the benchmark's JSON" >&2; exit 2; }
 export OMP_NUM_THREADS="${OMP_NUM_THREADS:-2}"
 json="$(mktemp)"
-trap 'rm -f "$json"' EXIT
+order="$(mktemp)"
+trap 'rm -f "$json" "$order"' EXIT
+# Rows in registration order (the runs themselves are interleaved at random).
+"$bin" --benchmark_list_tests "$@" | awk -F/ '{print $3, $4}' > "$order"
 
 echo "# $(date -u '+%Y-%m-%d %H:%M UTC'), $(lscpu | sed -n 's/^Model name: *//p'), OMP_NUM_THREADS=$OMP_NUM_THREADS, load $(cut -d' ' -f1-3 /proc/loadavg)"
 "$bin" --benchmark_repetitions="${REPS:-3}" --benchmark_enable_random_interleaving=true \
@@ -28,8 +31,9 @@ echo "# $(date -u '+%Y-%m-%d %H:%M UTC'), $(lscpu | sed -n 's/^Model name: *//p'
 jq -r --arg reps "${REPS:-3}" '.benchmarks[]
        | select(.aggregate_name == "median" or ($reps == "1" and .run_type == "iteration"))
        | (.run_name | split("/")) as $p | "\($p[2]) \($p[3]) \($p[1]) \(.GFLOPS)"' "$json" |
-  awk '
-    { key = $1 " " $2; if (!(key in seen)) { seen[key] = 1; order[n++] = key } g[key, $3] = $4 }
+  awk -v order_file="$order" '
+    BEGIN { while ((getline line < order_file) > 0) if (!(line in seen)) { seen[line] = 1; order[n++] = line } }
+    { g[$1 " " $2, $3] = $4 }
     END {
       printf "%-20s %-10s %8s %8s %6s %8s %8s %8s\n", "shape", "pass", "ours", "raw", "ratio",
              "nochunk", "nowcache", "onednn"

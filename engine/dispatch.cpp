@@ -2,6 +2,8 @@
 
 #include <mutex>
 
+#include "engine/op_profiler.h"
+
 namespace cvd {
 
 const char* op_name(OpId op) {
@@ -40,6 +42,11 @@ void dispatch(OpId op, const Tensor& key, const KernelArgs& args) {
     fail(ErrorCategory::unsupported, "no kernel for op '{}' on device {} with dtype {}",
          op_name(op), key.device().str(), dtype_name(key.dtype()));
   }
+  if (!op_profiler::enabled()) {
+    k->fn(args);
+    return;
+  }
+  const op_profiler::ScopedOpTimer timer(op);
   k->fn(args);
 }
 

@@ -4,7 +4,8 @@
 // arithmetic differs. Outputs are pre-filled with NaN, so an element a kernel forgets to write
 // fails.
 //
-// Tolerances, as max |ours - ref| <= tol * max(max |ref|, 1e-3) over each output:
+// Tolerances, as max |ours - ref| <= tol * max(max finite |ref|, 1e-3) over each output (an
+// infinite reference must be matched exactly):
 //   conv / deconv forward and backward data, batch norm, matmul: 1e-4;
 //   conv / deconv backward weight and bias (sums over N * OH * OW products): 1e-4 scaled by
 //     sqrt(max(1, reduction / 256)) (the random-walk growth of f32 rounding in long sums);
@@ -20,6 +21,7 @@
 #include "engine/dispatch.h"
 #include "engine/random.h"
 #include "engine/tensor.h"
+#include "kernels/cpu/depthwise_conv2d.h"
 #include "kernels/cpu/onednn_context.h"
 #include "kernels/cpu/onednn_conv_family.h"
 #include "kernels/kernel_params.h"
@@ -59,7 +61,6 @@ Pair outputs(const Shape& shape) {
 
 Pair none() { return {}; }
 
-
 const KernelInfo& kernel(OpId op, DType dt) {
   const KernelInfo* k = kernel_registry().find(op, DeviceType::cpu, dt);
   if (k == nullptr) throw std::runtime_error(std::string("no kernel for ") + op_name(op));
@@ -86,15 +87,20 @@ void expect_close(const Pair& p, double tol, const std::string& what) {
   ASSERT_EQ(ref.size(), got.size()) << what;
   double scale = 1e-3, worst = 0.0;
   size_t worst_at = 0;
-  for (double r : ref) scale = std::max(scale, std::abs(r));
+  for (double r : ref) {
+    if (std::isfinite(r)) scale = std::max(scale, std::abs(r));
+  }
   for (size_t i = 0; i < ref.size(); ++i) {
-    const double err = std::isnan(got[i]) ? std::numeric_limits<double>::infinity()
-                                          : std::abs(got[i] - ref[i]);
+    // An infinite reference (max pooling over an empty window) must be matched exactly.
+    const double err = got[i] == ref[i] ? 0.0
+                       : std::isfinite(got[i]) && std::isfinite(ref[i])
+                           ? std::abs(got[i] - ref[i])
+                           : std::numeric_limits<double>::infinity();
     if (err > worst) worst = err, worst_at = i;
   }
   EXPECT_LE(worst, tol * scale) << what << ": worst element " << worst_at << " got "
-                                << got[worst_at] << " want " << ref[worst_at] << " (scale "
-                                << scale << ")";
+                                << got[worst_at] << " want " << ref[worst_at] << " (scale " << scale
+                                << ")";
 }
 
 double sum_tolerance(int64_t reduction) {
@@ -154,6 +160,13 @@ const std::vector<ConvCase>& conv_cases() {
       {"depthwise 4x4 s2 pads 1/2", 2, 16, 9, 10, 16, 4, 4, conv_params(2, 1, 2, 1, 2, 1, 16),
        false},
       {"depthwise multiplier 2", 2, 4, 6, 5, 8, 3, 3, conv_params(1, 1, 1, 1, 1, 1, 4), true},
+      // Rows of 16+ output pixels: the AVX-512 kernel's full 16-pixel groups plus a short one.
+      {"depthwise 3x3 s1 wide rows", 2, 32, 5, 37, 32, 3, 3, conv_params(1, 1, 1, 1, 1, 1, 32),
+       true},
+      {"depthwise 5x5 s1 rows of 16", 1, 16, 4, 16, 16, 5, 5, conv_params(1, 2, 2, 2, 2, 1, 16),
+       false},
+      {"depthwise 3x3 s2 wide rows", 1, 16, 6, 40, 16, 3, 3, conv_params(2, 1, 1, 1, 1, 1, 16),
+       true},
       {"blocked channels 32->48", 2, 32, 12, 10, 48, 3, 3, conv_params(1, 1, 1, 1, 1), true},
       {"channels 20->24 7x7", 2, 20, 11, 9, 24, 7, 7, conv_params(1, 3, 3, 3, 3), true},
       {"1x1 expansion 24->96", 3, 24, 5, 6, 96, 1, 1, conv_params(1, 0, 0, 0, 0), false},
@@ -188,7 +201,8 @@ void check_conv_case(const ConvCase& cc) {
   for (bool with_gb : {true, false}) {
     Pair gw = outputs(ws), gb = with_gb ? outputs({cc.o}) : none();
     run_both(OpId::conv2d_backward_weight, {gy, x}, {gw, gb}, &p);
-    expect_close(gw, tol, with_gb ? "conv2d backward weight (with bias)" : "conv2d backward weight");
+    expect_close(gw, tol,
+                 with_gb ? "conv2d backward weight (with bias)" : "conv2d backward weight");
     if (with_gb) expect_close(gb, tol, "conv2d backward bias");
   }
 }
@@ -215,6 +229,14 @@ TEST(OnednnConv, MatchesReferenceAllCases) {
 
 // The same cases through the other plans: the default sends depthwise convolutions to the
 // hand-written kernel and pointwise ones to matmuls; these run them on oneDNN convolutions too.
+// The depthwise cases again with the AVX-512 depthwise kernel switched off, so the portable one
+// is checked too on a CPU that has AVX-512 (on one without, both runs take the portable path).
+TEST(OnednnConv, MatchesReferenceWithPortableDepthwiseKernel) {
+  cpu::set_depthwise_avx512_allowed(false);
+  for (const ConvCase& cc : conv_cases()) check_conv_case(cc);
+  cpu::set_depthwise_avx512_allowed(true);
+}
+
 TEST(OnednnConv, MatchesReferenceBatchSplitIntoChunks) {
   // A 1-byte budget runs every image as its own chunk (summed weight gradients included).
   PlanOverride o(static_cast<int>(onednn::ActivationLayout::preferred), 1, 0);
@@ -323,7 +345,8 @@ std::string bn_name(const BnCase& c) {
 
 TEST(OnednnBatchNorm, ForwardBackwardAndRunningStatsMatchReference) {
   std::vector<BnCase> cases;
-  for (const Shape& s : {Shape{2, 3, 5, 7}, Shape{1, 4, 1, 3}, Shape{4, 20, 3, 3}}) {
+  for (const Shape& s : {Shape{2, 3, 5, 7}, Shape{1, 4, 1, 3}, Shape{4, 20, 3, 3}, Shape{6, 5},
+                         Shape{3, 4, 10}, Shape{2, 16, 24, 40}}) {
     for (bool training : {true, false}) {
       for (int affine = 0; affine < 4; ++affine) {
         cases.push_back({s, training, (affine & 1) != 0, (affine & 2) != 0});
@@ -466,8 +489,8 @@ TEST(OnednnMatmul, TransposesAndBatchBroadcastMatchReference) {
     int64_t batch, m, k, n, b_batch;
   };
   const std::vector<MatmulCase> cases = {
-      {1, 5, 7, 3, 1}, {3, 4, 6, 5, 3}, {4, 3, 8, 9, 1}, {2, 1, 5, 1, 2},
-      {1, 17, 1, 13, 1}, {2, 33, 40, 18, 1},
+      {1, 5, 7, 3, 1}, {3, 4, 6, 5, 3},   {4, 3, 8, 9, 1},
+      {2, 1, 5, 1, 2}, {1, 17, 1, 13, 1}, {2, 33, 40, 18, 1},
   };
   for (const MatmulCase& mc : cases) {
     for (int t = 0; t < 4; ++t) {
@@ -479,7 +502,8 @@ TEST(OnednnMatmul, TransposesAndBatchBroadcastMatchReference) {
                    std::to_string(mc.b_batch) + " trans " + std::to_string(t));
       Generator gen(53);
       Pair a = normal(p.trans_a ? Shape{mc.batch, mc.k, mc.m} : Shape{mc.batch, mc.m, mc.k}, gen);
-      Pair b = normal(p.trans_b ? Shape{mc.b_batch, mc.n, mc.k} : Shape{mc.b_batch, mc.k, mc.n}, gen);
+      Pair b =
+          normal(p.trans_b ? Shape{mc.b_batch, mc.n, mc.k} : Shape{mc.b_batch, mc.k, mc.n}, gen);
       Pair c = outputs({mc.batch, mc.m, mc.n});
       run_both(OpId::matmul, {a, b}, {c}, &p);
       expect_close(c, 1e-4, "matmul");

@@ -13,6 +13,7 @@
 #include "kernels/cpu/depthwise_conv2d_kernels.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cstring>
 #include <vector>
 
@@ -35,7 +36,7 @@ namespace {
 
 struct WidePlan {
   int64_t sh = 1, sw = 1, hq = 0, wq = 0;
-  int64_t block = 0;  // wide-plane elements per pass (whole rows, a few KiB: stays in L1)
+  int64_t block = 0;         // wide-plane elements per pass (whole rows, a few KiB: stays in L1)
   std::vector<int64_t> tap;  // offset of each filter tap (ky-major) in the phase planes
   int64_t phase_size() const { return hq * wq; }
   int64_t phases_size() const { return sh * sw * hq * wq; }
@@ -97,8 +98,7 @@ CVD_INLINE void widen_plane(const DepthwiseGeometry& g, const WidePlan& p, const
   }
 }
 
-CVD_INLINE void multiply_add(float* __restrict acc, const float* __restrict s, float f,
-                             int64_t n) {
+CVD_INLINE void multiply_add(float* __restrict acc, const float* __restrict s, float f, int64_t n) {
   for (int64_t i = 0; i < n; ++i) acc[i] += f * s[i];
 }
 
@@ -118,8 +118,8 @@ CVD_INLINE float dot(const float* __restrict a, const float* __restrict b, int64
 
 // One (image, channel) plane of the forward pass. work: phases + oh * wq floats.
 CVD_DEPTHWISE_CLONES
-void forward_plane(const DepthwiseGeometry& g, const WidePlan& p, const float* x,
-                   const float* filt, float bias, float* y, float* work) {
+void forward_plane(const DepthwiseGeometry& g, const WidePlan& p, const float* x, const float* filt,
+                   float bias, float* y, float* work) {
   float* phases = work;
   float* acc = work + p.phases_size();
   const int64_t n = g.oh * p.wq, taps = g.kh * g.kw;
@@ -250,13 +250,17 @@ void backward_weight_portable(const DepthwiseGeometry& g, int64_t c0, int64_t c1
 
 namespace {
 
+std::atomic<bool> g_avx512_allowed{true};
+
 // Channels [0, returned) go to the AVX-512 implementation, the rest to the portable one.
 int64_t avx512_channels(const DepthwiseGeometry& g) {
   static const bool supported = depthwise::avx512_supported();
-  return supported ? g.c / 16 * 16 : 0;
+  return supported && g_avx512_allowed.load(std::memory_order_relaxed) ? g.c / 16 * 16 : 0;
 }
 
 }  // namespace
+
+void set_depthwise_avx512_allowed(bool allowed) { g_avx512_allowed = allowed; }
 
 void depthwise_conv2d_forward(const DepthwiseGeometry& g, const float* x, const float* w,
                               const float* b, float* y) {

@@ -29,4 +29,8 @@ void depthwise_conv2d_backward_data(const DepthwiseGeometry& g, const float* gy,
 void depthwise_conv2d_backward_weight(const DepthwiseGeometry& g, const float* gy, const float* x,
                                       float* gw, float* gb);
 
+// Test and benchmark hook: false sends every channel to the portable implementation even on a
+// CPU with AVX-512 (true, the default, uses the AVX-512 one wherever the CPU has it).
+void set_depthwise_avx512_allowed(bool allowed);
+
 }  // namespace cvd::cpu

@@ -2,8 +2,9 @@
 // channels. Their 16 NCHW planes are transposed (16 x 16 register transposes) into a zero-padded
 // buffer of channel-interleaved pixels that stays in L2; every filter tap is then one aligned
 // vector load and one fused multiply-add per output pixel, with 8 output pixels accumulated in
-// registers; results are transposed back into the NCHW planes. Compiled with a target attribute
-// and only called when the CPU reports AVX-512F.
+// registers (forward and unit-stride backward data: 16, transposed in registers and stored
+// straight into the NCHW planes with masked stores); other results are transposed back into the
+// NCHW planes. Compiled with a target attribute and only called when the CPU reports AVX-512F.
 #include <immintrin.h>
 
 #include <algorithm>
@@ -19,9 +20,11 @@
 
 #define CVD_AVX512 __attribute__((target("avx512f")))
 
-// GCC 12 reports the intrinsics' internal undefined pass-through operands as maybe-uninitialized
-// (a known false positive at -O3); every vector here is written before it is read.
+// GCC 12 reports the intrinsics' internal undefined pass-through operands (_mm512_undefined_*)
+// as (maybe-)uninitialized once the transposes of partly constant tiles are inlined (a known
+// false positive at -O3); every vector here is written before it is read.
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuninitialized"
 
 namespace cvd::cpu::depthwise {
 
@@ -110,7 +113,12 @@ CVD_AVX512 void pack(const float* src, int64_t plane_stride, int64_t h, int64_t 
     float* d = dst + y0 * w * L;
     for (; i + L <= n; i += L) {
       __m512 r[16];
-      for (int c = 0; c < 16; ++c) r[c] = _mm512_loadu_ps(src + c * plane_stride + i);
+      for (int c = 0; c < 16; ++c) {
+        // 16 input streams are more than the hardware prefetcher follows: fetch 4 tiles ahead.
+        _mm_prefetch(reinterpret_cast<const char*>(src + c * plane_stride + i + 4 * L),
+                     _MM_HINT_T0);
+        r[c] = _mm512_loadu_ps(src + c * plane_stride + i);
+      }
       transpose16(r);
       for (int p = 0; p < 16; ++p) _mm512_store_ps(d + (i + p) * L, r[p]);
     }
@@ -118,7 +126,10 @@ CVD_AVX512 void pack(const float* src, int64_t plane_stride, int64_t h, int64_t 
   }
   for (; i + L <= n; i += L) {
     __m512 r[16];
-    for (int c = 0; c < 16; ++c) r[c] = _mm512_loadu_ps(src + c * plane_stride + i);
+    for (int c = 0; c < 16; ++c) {
+      _mm_prefetch(reinterpret_cast<const char*>(src + c * plane_stride + i + 4 * L), _MM_HINT_T0);
+      r[c] = _mm512_loadu_ps(src + c * plane_stride + i);
+    }
     transpose16(r);
     for (int p = 0; p < 16; ++p, cur.next(x0)) _mm512_store_ps(dst + cur.offset(), r[p]);
   }
@@ -177,42 +188,95 @@ void pack_weights(const float* w, int64_t c, int64_t taps, float* wb) {
 
 // N output pixels (ox0 .. ox0 + N - 1 of row oy) accumulated in registers over all taps.
 template <int N>
-CVD_AVX512 inline void forward_pixels(const DepthwiseGeometry& g, const PaddedInput& pi,
-                                      const float* wb, __m512 bias, const float* in, float* orow,
-                                      int64_t oy, int64_t ox0) {
+CVD_AVX512 inline void forward_accumulate(const DepthwiseGeometry& g, const PaddedInput& pi,
+                                          const float* wb, __m512 bias, const float* in, int64_t oy,
+                                          int64_t ox0, __m512 (&acc)[N]) {
   const int64_t sw = g.stride_w * L;
-  __m512 acc[N];
-#pragma GCC unroll 8
+#pragma GCC unroll 16
   for (int u = 0; u < N; ++u) acc[u] = bias;
   for (int64_t ky = 0; ky < g.kh; ++ky) {
     const float* irow = in + ((oy * g.stride_h + ky * g.dil_h) * pi.wp + ox0 * g.stride_w) * L;
     for (int64_t kx = 0; kx < g.kw; ++kx) {
       const __m512 wv = _mm512_load_ps(wb + (ky * g.kw + kx) * L);
       const float* ip = irow + kx * g.dil_w * L;
-#pragma GCC unroll 8
+#pragma GCC unroll 16
       for (int u = 0; u < N; ++u) acc[u] = _mm512_fmadd_ps(wv, _mm512_load_ps(ip + u * sw), acc[u]);
     }
   }
-#pragma GCC unroll 8
-  for (int u = 0; u < N; ++u) _mm512_store_ps(orow + (ox0 + u) * L, acc[u]);
 }
 
+// N <= 16 pixels of row oy from ox0: accumulated in registers, transposed to 16 channel vectors
+// and stored (masked to N pixels) straight into the NCHW planes.
+template <int N>
+CVD_AVX512 inline void forward_group(const DepthwiseGeometry& g, const PaddedInput& pi,
+                                     const float* wb, __m512 bias, const float* in, int64_t oy,
+                                     int64_t ox0, float* y, int64_t plane_stride) {
+  __m512 part[N];
+  forward_accumulate<N>(g, pi, wb, bias, in, oy, ox0, part);
+  __m512 acc[L];
+#pragma GCC unroll 16
+  for (int u = 0; u < L; ++u) acc[u] = u < N ? part[u] : _mm512_setzero_ps();
+  transpose16(acc);
+  float* out = y + oy * g.ow + ox0;
+  const __mmask16 keep = static_cast<__mmask16>((1u << N) - 1);
+  for (int c = 0; c < 16; ++c) _mm512_mask_storeu_ps(out + c * plane_stride, keep, acc[c]);
+}
+
+// The 16 output planes of one block, each row in groups of 16 pixels plus one shorter group.
 CVD_AVX512 void forward_block(const DepthwiseGeometry& g, const PaddedInput& pi, const float* wb,
-                              const float* bias, const float* in, float* out) {
+                              const float* bias, const float* in, float* y, int64_t plane_stride) {
   const __m512 bv = bias ? _mm512_loadu_ps(bias) : _mm512_setzero_ps();
   for (int64_t oy = 0; oy < g.oh; ++oy) {
-    float* orow = out + oy * g.ow * L;
     int64_t ox = 0;
-    for (; ox + U <= g.ow; ox += U) forward_pixels<U>(g, pi, wb, bv, in, orow, oy, ox);
-    switch (g.ow - ox) {  // the row's last pixels, still register blocked
-      case 7: forward_pixels<7>(g, pi, wb, bv, in, orow, oy, ox); break;
-      case 6: forward_pixels<6>(g, pi, wb, bv, in, orow, oy, ox); break;
-      case 5: forward_pixels<5>(g, pi, wb, bv, in, orow, oy, ox); break;
-      case 4: forward_pixels<4>(g, pi, wb, bv, in, orow, oy, ox); break;
-      case 3: forward_pixels<3>(g, pi, wb, bv, in, orow, oy, ox); break;
-      case 2: forward_pixels<2>(g, pi, wb, bv, in, orow, oy, ox); break;
-      case 1: forward_pixels<1>(g, pi, wb, bv, in, orow, oy, ox); break;
-      default: break;
+    for (; ox + L <= g.ow; ox += L) forward_group<L>(g, pi, wb, bv, in, oy, ox, y, plane_stride);
+    switch (g.ow - ox) {
+      case 15:
+        forward_group<15>(g, pi, wb, bv, in, oy, ox, y, plane_stride);
+        break;
+      case 14:
+        forward_group<14>(g, pi, wb, bv, in, oy, ox, y, plane_stride);
+        break;
+      case 13:
+        forward_group<13>(g, pi, wb, bv, in, oy, ox, y, plane_stride);
+        break;
+      case 12:
+        forward_group<12>(g, pi, wb, bv, in, oy, ox, y, plane_stride);
+        break;
+      case 11:
+        forward_group<11>(g, pi, wb, bv, in, oy, ox, y, plane_stride);
+        break;
+      case 10:
+        forward_group<10>(g, pi, wb, bv, in, oy, ox, y, plane_stride);
+        break;
+      case 9:
+        forward_group<9>(g, pi, wb, bv, in, oy, ox, y, plane_stride);
+        break;
+      case 8:
+        forward_group<8>(g, pi, wb, bv, in, oy, ox, y, plane_stride);
+        break;
+      case 7:
+        forward_group<7>(g, pi, wb, bv, in, oy, ox, y, plane_stride);
+        break;
+      case 6:
+        forward_group<6>(g, pi, wb, bv, in, oy, ox, y, plane_stride);
+        break;
+      case 5:
+        forward_group<5>(g, pi, wb, bv, in, oy, ox, y, plane_stride);
+        break;
+      case 4:
+        forward_group<4>(g, pi, wb, bv, in, oy, ox, y, plane_stride);
+        break;
+      case 3:
+        forward_group<3>(g, pi, wb, bv, in, oy, ox, y, plane_stride);
+        break;
+      case 2:
+        forward_group<2>(g, pi, wb, bv, in, oy, ox, y, plane_stride);
+        break;
+      case 1:
+        forward_group<1>(g, pi, wb, bv, in, oy, ox, y, plane_stride);
+        break;
+      default:
+        break;
     }
   }
 }
@@ -243,25 +307,52 @@ struct Taps {
 
 // N input pixels of one column phase (class indices j0 .. j0 + N - 1) gathered over all taps.
 template <int N>
-CVD_AVX512 inline void gather_pixels(const DepthwiseGeometry& g, const Taps& t, const float* wb,
-                                     const float* grad, float* orow, int64_t first, int64_t j0) {
-  __m512 acc[N];
-#pragma GCC unroll 8
+CVD_AVX512 inline void gather_accumulate(const DepthwiseGeometry& g, const Taps& t, const float* wb,
+                                         const float* grad, int64_t j0, __m512 (&acc)[N]) {
+#pragma GCC unroll 16
   for (int u = 0; u < N; ++u) acc[u] = _mm512_setzero_ps();
   for (int64_t a = 0; a < t.rows; ++a) {
     for (int64_t b = 0; b < t.cols; ++b) {
       const __m512 wv = _mm512_load_ps(wb + (t.ky[a] * g.kw + t.kx[b]) * L);
       const float* gp = grad + (t.row_base[a] + t.col_off[b] + j0) * L;
-#pragma GCC unroll 8
+#pragma GCC unroll 16
       for (int u = 0; u < N; ++u) acc[u] = _mm512_fmadd_ps(wv, _mm512_load_ps(gp + u * L), acc[u]);
     }
   }
+}
+
+// Strided column phases: N pixels into a channel-interleaved row buffer (unpacked later).
+template <int N>
+CVD_AVX512 inline void gather_pixels(const DepthwiseGeometry& g, const Taps& t, const float* wb,
+                                     const float* grad, float* orow, int64_t first, int64_t j0) {
+  __m512 acc[N];
+  gather_accumulate<N>(g, t, wb, grad, j0, acc);
 #pragma GCC unroll 8
   for (int u = 0; u < N; ++u) _mm512_store_ps(orow + (first + (j0 + u) * g.stride_w) * L, acc[u]);
 }
 
+// Unit stride: N <= 16 consecutive pixels of row iy, transposed and stored (masked) straight
+// into the NCHW planes.
+template <int N>
+CVD_AVX512 inline void gather_group(const DepthwiseGeometry& g, const Taps& t, const float* wb,
+                                    const float* grad, int64_t iy, int64_t j0, float* gx,
+                                    int64_t plane_stride) {
+  __m512 part[N];
+  gather_accumulate<N>(g, t, wb, grad, j0, part);
+  __m512 acc[L];
+#pragma GCC unroll 16
+  for (int u = 0; u < L; ++u) acc[u] = u < N ? part[u] : _mm512_setzero_ps();
+  transpose16(acc);
+  float* out = gx + iy * g.w + j0;
+  const __mmask16 keep = static_cast<__mmask16>((1u << N) - 1);
+  for (int c = 0; c < 16; ++c) _mm512_mask_storeu_ps(out + c * plane_stride, keep, acc[c]);
+}
+
+// The input-gradient planes of one block: straight into the NCHW planes gx for unit stride,
+// else into the channel-interleaved buffer `out` (h x w pixels) for the caller to unpack.
 CVD_AVX512 void backward_data_block(const DepthwiseGeometry& g, const GradLayout& gl,
-                                    const float* wb, const float* grad, float* out) {
+                                    const float* wb, const float* grad, float* out, float* gx,
+                                    int64_t plane_stride) {
   std::vector<int64_t> row_taps, row_base;  // per input row: filter rows and their grad rows
   std::vector<int64_t> col_taps, col_off;   // per column phase: filter columns and ox offsets
   for (int64_t iy = 0; iy < g.h; ++iy) {
@@ -287,18 +378,86 @@ CVD_AVX512 void backward_data_block(const DepthwiseGeometry& g, const GradLayout
         col_off.push_back(t / g.stride_w);  // ox of the class's first column (exact division)
       }
       const Taps taps{row_taps.data(), row_base.data(), static_cast<int64_t>(row_taps.size()),
-                      col_taps.data(), col_off.data(), static_cast<int64_t>(col_taps.size())};
+                      col_taps.data(), col_off.data(),  static_cast<int64_t>(col_taps.size())};
       int64_t j = 0;
+      if (g.stride_w == 1) {
+        for (; j + L <= count; j += L) gather_group<L>(g, taps, wb, grad, iy, j, gx, plane_stride);
+        switch (count - j) {
+          case 15:
+            gather_group<15>(g, taps, wb, grad, iy, j, gx, plane_stride);
+            break;
+          case 14:
+            gather_group<14>(g, taps, wb, grad, iy, j, gx, plane_stride);
+            break;
+          case 13:
+            gather_group<13>(g, taps, wb, grad, iy, j, gx, plane_stride);
+            break;
+          case 12:
+            gather_group<12>(g, taps, wb, grad, iy, j, gx, plane_stride);
+            break;
+          case 11:
+            gather_group<11>(g, taps, wb, grad, iy, j, gx, plane_stride);
+            break;
+          case 10:
+            gather_group<10>(g, taps, wb, grad, iy, j, gx, plane_stride);
+            break;
+          case 9:
+            gather_group<9>(g, taps, wb, grad, iy, j, gx, plane_stride);
+            break;
+          case 8:
+            gather_group<8>(g, taps, wb, grad, iy, j, gx, plane_stride);
+            break;
+          case 7:
+            gather_group<7>(g, taps, wb, grad, iy, j, gx, plane_stride);
+            break;
+          case 6:
+            gather_group<6>(g, taps, wb, grad, iy, j, gx, plane_stride);
+            break;
+          case 5:
+            gather_group<5>(g, taps, wb, grad, iy, j, gx, plane_stride);
+            break;
+          case 4:
+            gather_group<4>(g, taps, wb, grad, iy, j, gx, plane_stride);
+            break;
+          case 3:
+            gather_group<3>(g, taps, wb, grad, iy, j, gx, plane_stride);
+            break;
+          case 2:
+            gather_group<2>(g, taps, wb, grad, iy, j, gx, plane_stride);
+            break;
+          case 1:
+            gather_group<1>(g, taps, wb, grad, iy, j, gx, plane_stride);
+            break;
+          default:
+            break;
+        }
+        continue;
+      }
       for (; j + U <= count; j += U) gather_pixels<U>(g, taps, wb, grad, orow, first, j);
       switch (count - j) {
-        case 7: gather_pixels<7>(g, taps, wb, grad, orow, first, j); break;
-        case 6: gather_pixels<6>(g, taps, wb, grad, orow, first, j); break;
-        case 5: gather_pixels<5>(g, taps, wb, grad, orow, first, j); break;
-        case 4: gather_pixels<4>(g, taps, wb, grad, orow, first, j); break;
-        case 3: gather_pixels<3>(g, taps, wb, grad, orow, first, j); break;
-        case 2: gather_pixels<2>(g, taps, wb, grad, orow, first, j); break;
-        case 1: gather_pixels<1>(g, taps, wb, grad, orow, first, j); break;
-        default: break;
+        case 7:
+          gather_pixels<7>(g, taps, wb, grad, orow, first, j);
+          break;
+        case 6:
+          gather_pixels<6>(g, taps, wb, grad, orow, first, j);
+          break;
+        case 5:
+          gather_pixels<5>(g, taps, wb, grad, orow, first, j);
+          break;
+        case 4:
+          gather_pixels<4>(g, taps, wb, grad, orow, first, j);
+          break;
+        case 3:
+          gather_pixels<3>(g, taps, wb, grad, orow, first, j);
+          break;
+        case 2:
+          gather_pixels<2>(g, taps, wb, grad, orow, first, j);
+          break;
+        case 1:
+          gather_pixels<1>(g, taps, wb, grad, orow, first, j);
+          break;
+        default:
+          break;
       }
     }
   }
@@ -322,16 +481,20 @@ CVD_AVX512 void backward_weight_block(const DepthwiseGeometry& g, const PaddedIn
       int64_t ox = 0;
       for (; ox + 4 <= g.ow; ox += 4) {
         a0 = _mm512_fmadd_ps(_mm512_load_ps(gp + ox * L), _mm512_load_ps(ip + ox * sw), a0);
-        a1 = _mm512_fmadd_ps(_mm512_load_ps(gp + (ox + 1) * L), _mm512_load_ps(ip + (ox + 1) * sw), a1);
-        a2 = _mm512_fmadd_ps(_mm512_load_ps(gp + (ox + 2) * L), _mm512_load_ps(ip + (ox + 2) * sw), a2);
-        a3 = _mm512_fmadd_ps(_mm512_load_ps(gp + (ox + 3) * L), _mm512_load_ps(ip + (ox + 3) * sw), a3);
+        a1 = _mm512_fmadd_ps(_mm512_load_ps(gp + (ox + 1) * L), _mm512_load_ps(ip + (ox + 1) * sw),
+                             a1);
+        a2 = _mm512_fmadd_ps(_mm512_load_ps(gp + (ox + 2) * L), _mm512_load_ps(ip + (ox + 2) * sw),
+                             a2);
+        a3 = _mm512_fmadd_ps(_mm512_load_ps(gp + (ox + 3) * L), _mm512_load_ps(ip + (ox + 3) * sw),
+                             a3);
       }
       for (; ox < g.ow; ++ox) {
         a0 = _mm512_fmadd_ps(_mm512_load_ps(gp + ox * L), _mm512_load_ps(ip + ox * sw), a0);
       }
       const __m512 row = _mm512_add_ps(_mm512_add_ps(a0, a1), _mm512_add_ps(a2, a3));
       lo = _mm512_add_pd(lo, _mm512_cvtps_pd(_mm512_castps512_ps256(row)));
-      hi = _mm512_add_pd(hi, _mm512_cvtps_pd(_mm256_castpd_ps(_mm512_extractf64x4_pd(_mm512_castps_pd(row), 1))));
+      hi = _mm512_add_pd(
+          hi, _mm512_cvtps_pd(_mm256_castpd_ps(_mm512_extractf64x4_pd(_mm512_castps_pd(row), 1))));
     }
     _mm512_store_pd(lanes, lo);
     _mm512_store_pd(lanes + 8, hi);
@@ -341,9 +504,11 @@ CVD_AVX512 void backward_weight_block(const DepthwiseGeometry& g, const PaddedIn
     __m512d lo = _mm512_setzero_pd(), hi = _mm512_setzero_pd();
     for (int64_t oy = 0; oy < g.oh; ++oy) {
       __m512 s = _mm512_setzero_ps();
-      for (int64_t ox = 0; ox < g.ow; ++ox) s = _mm512_add_ps(s, _mm512_load_ps(grad + (oy * g.ow + ox) * L));
+      for (int64_t ox = 0; ox < g.ow; ++ox)
+        s = _mm512_add_ps(s, _mm512_load_ps(grad + (oy * g.ow + ox) * L));
       lo = _mm512_add_pd(lo, _mm512_cvtps_pd(_mm512_castps512_ps256(s)));
-      hi = _mm512_add_pd(hi, _mm512_cvtps_pd(_mm256_castpd_ps(_mm512_extractf64x4_pd(_mm512_castps_pd(s), 1))));
+      hi = _mm512_add_pd(
+          hi, _mm512_cvtps_pd(_mm256_castpd_ps(_mm512_extractf64x4_pd(_mm512_castps_pd(s), 1))));
     }
     _mm512_store_pd(lanes, lo);
     _mm512_store_pd(lanes + 8, hi);
@@ -360,17 +525,16 @@ void forward_avx512(const DepthwiseGeometry& g, int64_t c0, int64_t c1, const fl
   const PaddedInput pi = padded_input(g);
   const int64_t taps = g.kh * g.kw, blocks = (c1 - c0) / L;
   parallel_ranges(g.n * blocks, g.oh * g.ow * L * taps, [&](int64_t begin, int64_t end) {
-    Buffer in_buf, out_buf, w_buf;
+    Buffer in_buf, w_buf;
     float* in = in_buf.get(pi.hp * pi.wp * L);
-    float* out = out_buf.get(g.oh * g.ow * L);
     float* wb = w_buf.get(taps * L);
     zero_border(in, pi.hp, pi.wp, g.pad_top, g.h, g.pad_left, g.w);
     for (int64_t i = begin; i < end; ++i) {
       const int64_t img = i / blocks, c = c0 + (i % blocks) * L;
       pack_weights(w, c, taps, wb);
       pack(x + (img * g.c + c) * g.h * g.w, g.h * g.w, g.h, g.w, in, pi.wp, g.pad_top, g.pad_left);
-      forward_block(g, pi, wb, b ? b + c : nullptr, in, out);
-      unpack(out, g.ow, g.oh, g.ow, y + (img * g.c + c) * g.oh * g.ow, g.oh * g.ow);
+      forward_block(g, pi, wb, b ? b + c : nullptr, in, y + (img * g.c + c) * g.oh * g.ow,
+                    g.oh * g.ow);
     }
   });
 }
@@ -389,8 +553,9 @@ void backward_data_avx512(const DepthwiseGeometry& g, int64_t c0, int64_t c1, co
       const int64_t img = i / blocks, c = c0 + (i % blocks) * L;
       pack_weights(w, c, taps, wb);
       pack(gy + (img * g.c + c) * g.oh * g.ow, g.oh * g.ow, g.oh, g.ow, grad, gl.wg, 0, gl.left);
-      backward_data_block(g, gl, wb, grad, out);
-      unpack(out, g.w, g.h, g.w, gx + (img * g.c + c) * g.h * g.w, g.h * g.w);
+      float* planes = gx + (img * g.c + c) * g.h * g.w;
+      backward_data_block(g, gl, wb, grad, out, planes, g.h * g.w);
+      if (g.stride_w > 1) unpack(out, g.w, g.h, g.w, planes, g.h * g.w);
     }
   });
 }
@@ -443,8 +608,8 @@ void forward_avx512(const DepthwiseGeometry&, int64_t, int64_t, const float*, co
                     const float*, float*) {}
 void backward_data_avx512(const DepthwiseGeometry&, int64_t, int64_t, const float*, const float*,
                           float*) {}
-void backward_weight_avx512(const DepthwiseGeometry&, int64_t, int64_t, const float*,
-                            const float*, float*, float*) {}
+void backward_weight_avx512(const DepthwiseGeometry&, int64_t, int64_t, const float*, const float*,
+                            float*, float*) {}
 }  // namespace cvd::cpu::depthwise
 
 #endif

@@ -21,8 +21,7 @@ void accumulate(float* dst, const float* src, int64_t count) {
   });
 }
 
-ChunkedPrimitive::ChunkedPrimitive(dnnl::primitive prim, std::vector<ArgSpec> args,
-                                   int64_t chunks)
+ChunkedPrimitive::ChunkedPrimitive(dnnl::primitive prim, std::vector<ArgSpec> args, int64_t chunks)
     : prim_(std::move(prim)), args_(std::move(args)), chunks_(chunks) {
   CVD_ASSERT(chunks_ >= 1);
   const size_t n = args_.size();
@@ -47,9 +46,10 @@ ChunkedPrimitive::ChunkedPrimitive(dnnl::primitive prim, std::vector<ArgSpec> ar
     }
     if (needs_reorder_[i]) {
       slots_[i] = take_slot();
-      reorders_[i] = is_output(a.kind)
-                         ? dnnl::reorder(dnnl::reorder::primitive_desc(eng, a.prim_md, eng, a.user_md))
-                         : dnnl::reorder(dnnl::reorder::primitive_desc(eng, a.user_md, eng, a.prim_md));
+      reorders_[i] =
+          is_output(a.kind)
+              ? dnnl::reorder(dnnl::reorder::primitive_desc(eng, a.prim_md, eng, a.user_md))
+              : dnnl::reorder(dnnl::reorder::primitive_desc(eng, a.user_md, eng, a.prim_md));
     }
     if (a.kind == ArgKind::sum_output && chunks_ > 1) partial_slots_[i] = take_slot();
   }
@@ -62,9 +62,9 @@ void ChunkedPrimitive::execute(const std::vector<Tensor>& tensors) {
   const size_t n = args_.size();
 
   // Memories that stay the same for every chunk.
-  std::vector<dnnl::memory> fixed(n);      // primitive-side memory of whole arguments
-  std::vector<dnnl::memory> scratch(n);    // primitive-side memory of reordered batch arguments
-  std::vector<dnnl::memory> partial(n);    // per-chunk partial sums of summed outputs
+  std::vector<dnnl::memory> fixed(n);    // primitive-side memory of whole arguments
+  std::vector<dnnl::memory> scratch(n);  // primitive-side memory of reordered batch arguments
+  std::vector<dnnl::memory> partial(n);  // per-chunk partial sums of summed outputs
   for (size_t i = 0; i < n; ++i) {
     const ArgSpec& a = args_[i];
     const Tensor& t = tensors[i];
@@ -77,12 +77,12 @@ void ChunkedPrimitive::execute(const std::vector<Tensor>& tensors) {
         fixed[i] = tensor_memory(t, a.user_md);
         break;
       case ArgKind::sum_output:
-        fixed[i] = needs_reorder_[i]
-                       ? dnnl::memory(a.prim_md, eng, scratch_buffer(slots_[i], a.prim_md.get_size()))
-                       : tensor_memory(t, a.user_md);
+        fixed[i] = needs_reorder_[i] ? dnnl::memory(a.prim_md, eng,
+                                                    scratch_buffer(slots_[i], a.prim_md.get_size()))
+                                     : tensor_memory(t, a.user_md);
         if (partial_slots_[i] >= 0) {
-          partial[i] = dnnl::memory(a.prim_md, eng,
-                                    scratch_buffer(partial_slots_[i], a.prim_md.get_size()));
+          partial[i] =
+              dnnl::memory(a.prim_md, eng, scratch_buffer(partial_slots_[i], a.prim_md.get_size()));
         }
         break;
       case ArgKind::batch_input:

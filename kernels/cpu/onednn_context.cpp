@@ -136,8 +136,9 @@ const dnnl::memory& ReorderedWeight::get(const Tensor& w) {
 }
 
 void fail_onednn(OpId op, const dnnl::error& e) {
-  fail(ErrorCategory::unsupported, "kernels/cpu/onednn_*.cpp: oneDNN kernel of {} failed: {} (status {})",
-       op_name(op), e.what(), static_cast<int>(e.status));
+  fail(ErrorCategory::unsupported,
+       "kernels/cpu/onednn_*.cpp: oneDNN kernel of {} failed: {} (status {})", op_name(op),
+       e.what(), static_cast<int>(e.status));
 }
 
 int onednn_threads() { return omp_in_parallel() ? 1 : omp_get_max_threads(); }

@@ -40,7 +40,7 @@ void clear_caches();
 void set_weight_cache_enabled(bool enabled);
 bool weight_cache_enabled();
 
-// ---- Keys ----------------------------------------------------------------------------------------
+// ---- Keys --------------------------------------------------------------------------------------
 
 // A primitive's identity: the op, shapes, parameters and thread count, as a list of integers.
 struct CacheKey {
@@ -131,7 +131,7 @@ class ReorderedWeight {
   int64_t offset_ = -1;
 };
 
-// ---- Errors --------------------------------------------------------------------------------------
+// ---- Errors ------------------------------------------------------------------------------------
 
 // Throws cvd::Error(unsupported) naming the kernel, for a oneDNN exception (e.g. no
 // implementation for a parameter combination).

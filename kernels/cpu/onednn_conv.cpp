@@ -68,8 +68,8 @@ void conv2d(const KernelArgs& a) {
   check_f32_4d(w, "conv2d weight");
   check_f32_4d(y, "conv2d output");
   if (y.numel() == 0) return;
-  const ConvProblem pr = conv_problem(x.shape(), w.shape(), y.shape(), a.p<Conv2dParams>(),
-                                      b.defined());
+  const ConvProblem pr =
+      conv_problem(x.shape(), w.shape(), y.shape(), a.p<Conv2dParams>(), b.defined());
   if (use_depthwise_kernel(pr, ConvPass::forward)) {
     cpu::depthwise_conv2d_forward(
         depthwise_geometry(x.shape(), w.shape(), y.shape(), a.p<Conv2dParams>()), x.data<float>(),
@@ -146,9 +146,10 @@ void conv2d_backward_weight(const KernelArgs& a) {
 
 void register_conv_kernels(KernelRegistry& r) {
   r.add(OpId::conv2d, DeviceType::cpu, DType::f32, guarded<OpId::conv2d, conv2d>, "onednn");
-  r.add(OpId::conv2d_backward_data, DeviceType::cpu, DType::f32, guarded<OpId::conv2d_backward_data, conv2d_backward_data>, "onednn");
-  r.add(OpId::conv2d_backward_weight, DeviceType::cpu, DType::f32, guarded<OpId::conv2d_backward_weight, conv2d_backward_weight>,
-        "onednn");
+  r.add(OpId::conv2d_backward_data, DeviceType::cpu, DType::f32,
+        guarded<OpId::conv2d_backward_data, conv2d_backward_data>, "onednn");
+  r.add(OpId::conv2d_backward_weight, DeviceType::cpu, DType::f32,
+        guarded<OpId::conv2d_backward_weight, conv2d_backward_weight>, "onednn");
 }
 
 }  // namespace cvd::onednn

@@ -14,9 +14,10 @@ std::atomic<int> g_depthwise_override{-1};
 std::atomic<int> g_pointwise_override{-1};
 
 // Reordered activation bytes (input and output side) of one chunk above which the batch is split:
-// the chunk's blocked copies should still be in the (private + shared) caches when the primitive
-// and the reorder back read them.
-constexpr size_t kDefaultChunkBudget = size_t{8} << 20;
+// the chunk's blocked copies should still be in the shared cache when the primitive and the
+// reorder back read them, and the scratch buffers stay bounded. Measured on the shapes
+// (bench/compare_conv.sh): 32 MiB chunks beat whole-batch reorders and 8 MiB ones at 2 threads.
+constexpr size_t kDefaultChunkBudget = size_t{32} << 20;
 
 int64_t volume(const dnnl::memory::dims& d, size_t from) {
   int64_t v = 1;

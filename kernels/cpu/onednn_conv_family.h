@@ -97,8 +97,7 @@ typename Family::forward::primitive_desc forward_pd(const ConvProblem& p,
                                                     const dnnl::memory::desc& weights,
                                                     const dnnl::memory::desc& dst) {
   using tag = dnnl::memory::format_tag;
-  const dnnl::memory::desc bias =
-      p.bias ? f32_desc({p.dst[1]}, tag::x) : dnnl::memory::desc();
+  const dnnl::memory::desc bias = p.bias ? f32_desc({p.dst[1]}, tag::x) : dnnl::memory::desc();
   typename Family::forward::desc d(dnnl::prop_kind::forward_training, Family::algorithm, src,
                                    weights, bias, dst, p.strides, p.dilates, p.pad_l, p.pad_r);
   return typename Family::forward::primitive_desc(d, cpu_engine());
@@ -136,15 +135,14 @@ std::unique_ptr<ChunkedPrimitive> build_pass(const ConvProblem& p, ConvPass pass
       args.push_back({DNNL_ARG_DIFF_DST, ArgKind::batch_input, dst_user, pd.diff_dst_desc()});
       args.push_back({DNNL_ARG_WEIGHTS, ArgKind::weight_input, weights_user, pd.weights_desc()});
       args.push_back({DNNL_ARG_DIFF_SRC, ArgKind::batch_output, src_user, pd.diff_src_desc()});
-      return std::make_unique<ChunkedPrimitive>(typename Family::backward_data(pd),
-                                                std::move(args), choice.chunks);
+      return std::make_unique<ChunkedPrimitive>(typename Family::backward_data(pd), std::move(args),
+                                                choice.chunks);
     }
     case ConvPass::backward_weights: {
       const dnnl::memory::desc bias_req =
           p.bias ? f32_desc({p.dst[1]}, tag::x) : dnnl::memory::desc();
-      typename Family::backward_weights::desc d(Family::algorithm, src_req, weights_req,
-                                                bias_req, dst_req, p.strides, p.dilates,
-                                                p.pad_l, p.pad_r);
+      typename Family::backward_weights::desc d(Family::algorithm, src_req, weights_req, bias_req,
+                                                dst_req, p.strides, p.dilates, p.pad_l, p.pad_r);
       typename Family::backward_weights::primitive_desc pd(d, cpu_engine(), fwd);
       args.push_back({DNNL_ARG_SRC, ArgKind::batch_input, src_user, pd.src_desc()});
       args.push_back({DNNL_ARG_DIFF_DST, ArgKind::batch_input, dst_user, pd.diff_dst_desc()});

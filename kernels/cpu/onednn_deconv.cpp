@@ -57,8 +57,8 @@ void conv_transpose2d(const KernelArgs& a) {
   check_f32_4d(w, "conv_transpose2d weight");
   check_f32_4d(y, "conv_transpose2d output");
   if (y.numel() == 0) return;
-  const ConvProblem pr = deconv_problem(x.shape(), w.shape(), y.shape(),
-                                        a.p<ConvTranspose2dParams>(), b.defined());
+  const ConvProblem pr =
+      deconv_problem(x.shape(), w.shape(), y.shape(), a.p<ConvTranspose2dParams>(), b.defined());
   ChunkedPrimitive& plan = conv_pass_plan<DeconvolutionFamily>(pr, ConvPass::forward);
   if (b.defined()) {
     plan.execute({x, w, b, y});
@@ -90,8 +90,8 @@ void conv_transpose2d_backward_weight(const KernelArgs& a) {
     zero_fill(gb);
     return;
   }
-  const ConvProblem pr = deconv_problem(x.shape(), gw.shape(), gy.shape(),
-                                        a.p<ConvTranspose2dParams>(), gb.defined());
+  const ConvProblem pr =
+      deconv_problem(x.shape(), gw.shape(), gy.shape(), a.p<ConvTranspose2dParams>(), gb.defined());
   ChunkedPrimitive& plan = conv_pass_plan<DeconvolutionFamily>(pr, ConvPass::backward_weights);
   if (gb.defined()) {
     plan.execute({x, gy, gw, gb});
@@ -103,9 +103,13 @@ void conv_transpose2d_backward_weight(const KernelArgs& a) {
 }  // namespace
 
 void register_deconv_kernels(KernelRegistry& r) {
-  r.add(OpId::conv_transpose2d, DeviceType::cpu, DType::f32, guarded<OpId::conv_transpose2d, conv_transpose2d>, "onednn");
-  r.add(OpId::conv_transpose2d_backward_data, DeviceType::cpu, DType::f32, guarded<OpId::conv_transpose2d_backward_data, conv_transpose2d_backward_data>, "onednn");
-  r.add(OpId::conv_transpose2d_backward_weight, DeviceType::cpu, DType::f32, guarded<OpId::conv_transpose2d_backward_weight, conv_transpose2d_backward_weight>, "onednn");
+  r.add(OpId::conv_transpose2d, DeviceType::cpu, DType::f32,
+        guarded<OpId::conv_transpose2d, conv_transpose2d>, "onednn");
+  r.add(OpId::conv_transpose2d_backward_data, DeviceType::cpu, DType::f32,
+        guarded<OpId::conv_transpose2d_backward_data, conv_transpose2d_backward_data>, "onednn");
+  r.add(OpId::conv_transpose2d_backward_weight, DeviceType::cpu, DType::f32,
+        guarded<OpId::conv_transpose2d_backward_weight, conv_transpose2d_backward_weight>,
+        "onednn");
 }
 
 }  // namespace cvd::onednn

@@ -27,8 +27,8 @@ struct MatmulEntry {
 // A [batch, rows, cols] operand stored as [batch, rows, cols] or, transposed, [batch, cols, rows].
 dnnl::memory::desc operand_desc(int64_t batch, int64_t rows, int64_t cols, bool transposed) {
   const dnnl::memory::dims dims = {batch, rows, cols};
-  const dnnl::memory::dims strides =
-      transposed ? dnnl::memory::dims{rows * cols, 1, rows} : dnnl::memory::dims{rows * cols, cols, 1};
+  const dnnl::memory::dims strides = transposed ? dnnl::memory::dims{rows * cols, 1, rows}
+                                                : dnnl::memory::dims{rows * cols, cols, 1};
   return dnnl::memory::desc(dims, dnnl::memory::data_type::f32, strides);
 }
 
@@ -48,8 +48,8 @@ void matmul(const KernelArgs& args) {
       (p.trans_b ? b.shape()[2] : b.shape()[1]) != k ||
       (p.trans_b ? b.shape()[1] : b.shape()[2]) != n) {
     fail(ErrorCategory::internal,
-         "kernels/cpu/onednn_matmul.cpp: shapes a {} b {} c {} (trans {} {}) do not agree",
-         a.str(), b.str(), c.str(), p.trans_a, p.trans_b);
+         "kernels/cpu/onednn_matmul.cpp: shapes a {} b {} c {} (trans {} {}) do not agree", a.str(),
+         b.str(), c.str(), p.trans_a, p.trans_b);
   }
   if (c.numel() == 0) return;
   if (k == 0) {

@@ -5,7 +5,8 @@
 //   row-major window order, a NaN wins).
 // - average pooling with count_include_pad in ceil mode when a window runs past the right
 //   padding: PyTorch divides by the window clipped to the padded input, oneDNN by the kernel
-//   size.
+//   size;
+// - any forward geometry oneDNN declines to build a primitive for.
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -112,7 +113,7 @@ void run_forward(const Tensor& x, const Tensor& y, const Pool2dParams& p, bool m
   cpu_stream().wait();
 }
 
-// ---- Hand-written passes -------------------------------------------------------------------------
+// ---- Hand-written passes ---------------------------------------------------------------------
 
 // Index (in the plane) of the window maximum of output (oy, ox), -1 if the window has no pixel.
 inline int64_t window_argmax(const float* plane, const PoolGeometry& g, const Pool2dParams& p,
@@ -151,51 +152,75 @@ inline AvgWindow avg_window(const PoolGeometry& g, const Pool2dParams& p, int64_
   return {y0, y1, x0, x1, divisor > 0 ? 1.0f / static_cast<float>(divisor) : 0.0f};
 }
 
+void max_pool_forward_by_hand(const Tensor& x, const Tensor& y, const Pool2dParams& p) {
+  const PoolGeometry g = geometry(x, y);
+  const float* xp = x.data<float>();
+  float* yp = y.data<float>();
+  cpu::parallel_ranges(
+      g.planes(), g.oh * g.ow * p.kernel_h * p.kernel_w, [&](int64_t b, int64_t e) {
+        for (int64_t pl = b; pl < e; ++pl) {
+          const float* plane = xp + pl * g.h * g.w;
+          float* out = yp + pl * g.oh * g.ow;
+          for (int64_t oy = 0; oy < g.oh; ++oy) {
+            for (int64_t ox = 0; ox < g.ow; ++ox) {
+              const int64_t best = window_argmax(plane, g, p, oy, ox);
+              out[oy * g.ow + ox] =
+                  best >= 0 ? plane[best] : -std::numeric_limits<float>::infinity();
+            }
+          }
+        }
+      });
+}
+
 void avg_pool_forward_by_hand(const Tensor& x, const Tensor& y, const Pool2dParams& p) {
   const PoolGeometry g = geometry(x, y);
   const float* xp = x.data<float>();
   float* yp = y.data<float>();
-  cpu::parallel_ranges(g.planes(), g.oh * g.ow * p.kernel_h * p.kernel_w, [&](int64_t b, int64_t e) {
-    for (int64_t pl = b; pl < e; ++pl) {
-      const float* plane = xp + pl * g.h * g.w;
-      float* out = yp + pl * g.oh * g.ow;
-      for (int64_t oy = 0; oy < g.oh; ++oy) {
-        for (int64_t ox = 0; ox < g.ow; ++ox) {
-          const AvgWindow win = avg_window(g, p, oy, ox);
-          float sum = 0.0f;
-          for (int64_t iy = win.y0; iy < win.y1; ++iy) {
-            for (int64_t ix = win.x0; ix < win.x1; ++ix) sum += plane[iy * g.w + ix];
-          }
-          out[oy * g.ow + ox] = sum * win.inv_divisor;
-        }
-      }
-    }
-  });
+  cpu::parallel_ranges(g.planes(), g.oh * g.ow * p.kernel_h * p.kernel_w,
+                       [&](int64_t b, int64_t e) {
+                         for (int64_t pl = b; pl < e; ++pl) {
+                           const float* plane = xp + pl * g.h * g.w;
+                           float* out = yp + pl * g.oh * g.ow;
+                           for (int64_t oy = 0; oy < g.oh; ++oy) {
+                             for (int64_t ox = 0; ox < g.ow; ++ox) {
+                               const AvgWindow win = avg_window(g, p, oy, ox);
+                               float sum = 0.0f;
+                               for (int64_t iy = win.y0; iy < win.y1; ++iy) {
+                                 for (int64_t ix = win.x0; ix < win.x1; ++ix)
+                                   sum += plane[iy * g.w + ix];
+                               }
+                               out[oy * g.ow + ox] = sum * win.inv_divisor;
+                             }
+                           }
+                         }
+                       });
 }
 
 void avg_pool_backward_by_hand(const Tensor& gy, const Tensor& gx, const Pool2dParams& p) {
   const PoolGeometry g = geometry(gx, gy);
   const float* gyp = gy.data<float>();
   float* gxp = gx.data<float>();
-  cpu::parallel_ranges(g.planes(), g.oh * g.ow * p.kernel_h * p.kernel_w, [&](int64_t b, int64_t e) {
-    for (int64_t pl = b; pl < e; ++pl) {
-      const float* go = gyp + pl * g.oh * g.ow;
-      float* gi = gxp + pl * g.h * g.w;
-      std::fill(gi, gi + g.h * g.w, 0.0f);
-      for (int64_t oy = 0; oy < g.oh; ++oy) {
-        for (int64_t ox = 0; ox < g.ow; ++ox) {
-          const AvgWindow win = avg_window(g, p, oy, ox);
-          const float share = go[oy * g.ow + ox] * win.inv_divisor;
-          for (int64_t iy = win.y0; iy < win.y1; ++iy) {
-            for (int64_t ix = win.x0; ix < win.x1; ++ix) gi[iy * g.w + ix] += share;
-          }
-        }
-      }
-    }
-  });
+  cpu::parallel_ranges(g.planes(), g.oh * g.ow * p.kernel_h * p.kernel_w,
+                       [&](int64_t b, int64_t e) {
+                         for (int64_t pl = b; pl < e; ++pl) {
+                           const float* go = gyp + pl * g.oh * g.ow;
+                           float* gi = gxp + pl * g.h * g.w;
+                           std::fill(gi, gi + g.h * g.w, 0.0f);
+                           for (int64_t oy = 0; oy < g.oh; ++oy) {
+                             for (int64_t ox = 0; ox < g.ow; ++ox) {
+                               const AvgWindow win = avg_window(g, p, oy, ox);
+                               const float share = go[oy * g.ow + ox] * win.inv_divisor;
+                               for (int64_t iy = win.y0; iy < win.y1; ++iy) {
+                                 for (int64_t ix = win.x0; ix < win.x1; ++ix)
+                                   gi[iy * g.w + ix] += share;
+                               }
+                             }
+                           }
+                         }
+                       });
 }
 
-// ---- Kernels -------------------------------------------------------------------------------------
+// ---- Kernels ---------------------------------------------------------------------------------
 
 // in {x}, out {y}; Pool2dParams.
 void max_pool2d(const KernelArgs& a) {
@@ -203,7 +228,11 @@ void max_pool2d(const KernelArgs& a) {
   check_f32_4d(x, "max_pool2d input");
   check_f32_4d(y, "max_pool2d output");
   if (y.numel() == 0) return;
-  run_forward(x, y, a.p<Pool2dParams>(), true);
+  try {
+    run_forward(x, y, a.p<Pool2dParams>(), true);
+  } catch (const dnnl::error&) {  // a geometry oneDNN declines (e.g. unusual padding)
+    max_pool_forward_by_hand(x, y, a.p<Pool2dParams>());
+  }
 }
 
 // in {gy, x}, out {gx}: each output's gradient goes to its window's first maximum.
@@ -217,20 +246,21 @@ void max_pool2d_backward(const KernelArgs& a) {
   const float* xp = x.data<float>();
   const float* gyp = gy.data<float>();
   float* gxp = gx.data<float>();
-  cpu::parallel_ranges(g.planes(), g.oh * g.ow * p.kernel_h * p.kernel_w, [&](int64_t b, int64_t e) {
-    for (int64_t pl = b; pl < e; ++pl) {
-      const float* plane = xp + pl * g.h * g.w;
-      const float* go = gyp + pl * g.oh * g.ow;
-      float* gi = gxp + pl * g.h * g.w;
-      std::fill(gi, gi + g.h * g.w, 0.0f);
-      for (int64_t oy = 0; oy < g.oh; ++oy) {
-        for (int64_t ox = 0; ox < g.ow; ++ox) {
-          const int64_t best = window_argmax(plane, g, p, oy, ox);
-          if (best >= 0) gi[best] += go[oy * g.ow + ox];
-        }
-      }
-    }
-  });
+  cpu::parallel_ranges(g.planes(), g.oh * g.ow * p.kernel_h * p.kernel_w,
+                       [&](int64_t b, int64_t e) {
+                         for (int64_t pl = b; pl < e; ++pl) {
+                           const float* plane = xp + pl * g.h * g.w;
+                           const float* go = gyp + pl * g.oh * g.ow;
+                           float* gi = gxp + pl * g.h * g.w;
+                           std::fill(gi, gi + g.h * g.w, 0.0f);
+                           for (int64_t oy = 0; oy < g.oh; ++oy) {
+                             for (int64_t ox = 0; ox < g.ow; ++ox) {
+                               const int64_t best = window_argmax(plane, g, p, oy, ox);
+                               if (best >= 0) gi[best] += go[oy * g.ow + ox];
+                             }
+                           }
+                         }
+                       });
 }
 
 // in {x}, out {y}; Pool2dParams.
@@ -243,7 +273,11 @@ void avg_pool2d(const KernelArgs& a) {
   if (p.count_include_pad && !windows_inside_padding(geometry(x, y), p)) {
     avg_pool_forward_by_hand(x, y, p);
   } else {
-    run_forward(x, y, p, false);
+    try {
+      run_forward(x, y, p, false);
+    } catch (const dnnl::error&) {  // a geometry oneDNN declines
+      avg_pool_forward_by_hand(x, y, p);
+    }
   }
 }
 
@@ -260,28 +294,36 @@ void avg_pool2d_backward(const KernelArgs& a) {
     avg_pool_backward_by_hand(gy, gx, p);
     return;
   }
-  PoolEntry& e = cache.get(pool_key(3, g, p), [&] {
+  try {
+    PoolEntry& e = cache.get(pool_key(3, g, p), [&] {
+      const PoolDims d = pool_dims(g, p);
+      dnnl::pooling_backward::desc bd(pool_algorithm(false, p), d.src, d.dst, d.strides, d.kernel,
+                                      d.pad_l, d.pad_r);
+      auto entry = std::make_unique<PoolEntry>();
+      entry->prim = dnnl::pooling_backward(
+          dnnl::pooling_backward::primitive_desc(bd, cpu_engine(), forward_pd(g, p, false)));
+      return entry;
+    });
     const PoolDims d = pool_dims(g, p);
-    dnnl::pooling_backward::desc bd(pool_algorithm(false, p), d.src, d.dst, d.strides, d.kernel,
-                                    d.pad_l, d.pad_r);
-    auto entry = std::make_unique<PoolEntry>();
-    entry->prim = dnnl::pooling_backward(
-        dnnl::pooling_backward::primitive_desc(bd, cpu_engine(), forward_pd(g, p, false)));
-    return entry;
-  });
-  const PoolDims d = pool_dims(g, p);
-  e.prim.execute(cpu_stream(), {{DNNL_ARG_DIFF_DST, tensor_memory(gy, d.dst)},
-                                {DNNL_ARG_DIFF_SRC, tensor_memory(gx, d.src)}});
-  cpu_stream().wait();
+    e.prim.execute(cpu_stream(), {{DNNL_ARG_DIFF_DST, tensor_memory(gy, d.dst)},
+                                  {DNNL_ARG_DIFF_SRC, tensor_memory(gx, d.src)}});
+    cpu_stream().wait();
+  } catch (const dnnl::error&) {  // a geometry oneDNN declines
+    avg_pool_backward_by_hand(gy, gx, p);
+  }
 }
 
 }  // namespace
 
 void register_pool_kernels(KernelRegistry& r) {
-  r.add(OpId::max_pool2d, DeviceType::cpu, DType::f32, guarded<OpId::max_pool2d, max_pool2d>, "onednn");
-  r.add(OpId::max_pool2d_backward, DeviceType::cpu, DType::f32, guarded<OpId::max_pool2d_backward, max_pool2d_backward>, "onednn");
-  r.add(OpId::avg_pool2d, DeviceType::cpu, DType::f32, guarded<OpId::avg_pool2d, avg_pool2d>, "onednn");
-  r.add(OpId::avg_pool2d_backward, DeviceType::cpu, DType::f32, guarded<OpId::avg_pool2d_backward, avg_pool2d_backward>, "onednn");
+  r.add(OpId::max_pool2d, DeviceType::cpu, DType::f32, guarded<OpId::max_pool2d, max_pool2d>,
+        "onednn");
+  r.add(OpId::max_pool2d_backward, DeviceType::cpu, DType::f32,
+        guarded<OpId::max_pool2d_backward, max_pool2d_backward>, "onednn");
+  r.add(OpId::avg_pool2d, DeviceType::cpu, DType::f32, guarded<OpId::avg_pool2d, avg_pool2d>,
+        "onednn");
+  r.add(OpId::avg_pool2d_backward, DeviceType::cpu, DType::f32,
+        guarded<OpId::avg_pool2d_backward, avg_pool2d_backward>, "onednn");
 }
 
 }  // namespace cvd::onednn

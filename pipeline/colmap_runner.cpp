@@ -21,6 +21,7 @@
 #include <set>
 
 #include "engine/error.h"
+#include "pipeline/intrinsics_colmap_database.h"
 
 extern char** environ;
 
@@ -116,15 +117,17 @@ void require_success(const CommandRun& run, const std::string& subcommand, const
 std::string internal_name(size_t index) { return fmt::format("f{:06d}.png", index); }
 
 struct MapperAttempt {
-  ColmapModel model;  // largest model, internal names, COLMAP resolution
+  ColmapModel model;   // largest model, internal names, COLMAP resolution
+  fs::path model_dir;  // its binary form (mapper output)
   int num_models = 0;
   bool mapper_ok = false;
 };
 
 // Runs mapper + model_converter into <work_dir>/colmap_sparse_<attempt>, reads every model back and
 // keeps the one with most images. Never throws on missing or unreadable COLMAP output.
-MapperAttempt map_and_read(const fs::path& exe, const fs::path& work_dir, int attempt,
-                           const std::vector<std::string>& mapper_args, ColmapResult& result) {
+MapperAttempt map_and_read(const fs::path& exe, const fs::path& work_dir,
+                           const std::string& attempt, const std::vector<std::string>& mapper_args,
+                           ColmapResult& result) {
   MapperAttempt out;
   fs::path sparse = work_dir / fmt::format("colmap_sparse_{}", attempt);
   fs::remove_all(sparse);
@@ -159,7 +162,10 @@ MapperAttempt map_and_read(const fs::path& exe, const fs::path& work_dir, int at
     try {
       ColmapModel m = read_colmap_text_model(txt);
       ++out.num_models;
-      if (m.images.size() > out.model.images.size()) out.model = std::move(m);
+      if (m.images.size() > out.model.images.size()) {
+        out.model = std::move(m);
+        out.model_dir = dir;
+      }
     } catch (const Error& e) {
       spdlog::warn("COLMAP model {} is unreadable, skipped: {}", txt.string(), e.what());
     }
@@ -191,6 +197,60 @@ ColmapModel to_frame_space(const ColmapModel& m, const std::map<std::string, std
     out.images[copy.name] = std::move(copy);
   }
   return out;
+}
+
+// The single focal of a model at COLMAP's resolution (all frames share one camera).
+double model_focal(const ColmapModel& m) {
+  return m.cameras.empty() ? 0.0 : m.cameras.begin()->second.intrinsics().fx;
+}
+
+// Bundle adjustment of the chosen search model with the focal free (principal point and
+// distortion fixed). The refined model replaces `best` unless it lost frames or moved the focal
+// by more than options.max_refine_change, which is reported as a warning.
+void refine_focal(const fs::path& exe, const fs::path& work_dir, const ColmapOptions& options,
+                  double to_frames, MapperAttempt& best, ColmapResult& result) {
+  fs::path out = work_dir / "colmap_refined", txt = work_dir / "colmap_refined_txt";
+  fs::remove_all(out);
+  fs::remove_all(txt);
+  fs::create_directories(out);
+  fs::create_directories(txt);
+  CommandRun ba = run_logged(
+      exe, "bundle_adjuster",
+      {"--input_path", best.model_dir.string(), "--output_path", out.string(),
+       "--BundleAdjustment.refine_focal_length", "1", "--BundleAdjustment.refine_principal_point",
+       "0", "--BundleAdjustment.refine_extra_params", "0"},
+      result);
+  auto reject = [&](const std::string& why) {
+    std::string w =
+        fmt::format("the focal refinement was not used ({}); keeping the searched focal {:.1f} px",
+                    why, model_focal(best.model) * to_frames);
+    spdlog::warn("colmap: {}", w);
+    result.warnings.push_back(w);
+  };
+  if (ba.exit_code != 0) return reject(fmt::format("bundle_adjuster exit code {}", ba.exit_code));
+  CommandRun conv = run_logged(
+      exe, "model_converter",
+      {"--input_path", out.string(), "--output_path", txt.string(), "--output_type", "TXT"},
+      result);
+  if (conv.exit_code != 0) return reject("model_converter failed on the refined model");
+  ColmapModel refined;
+  try {
+    refined = read_colmap_text_model(txt);
+  } catch (const Error& e) {
+    return reject(e.what());
+  }
+  const double before = model_focal(best.model), after = model_focal(refined);
+  if (refined.images.size() != best.model.images.size()) return reject("it lost registered frames");
+  if (!(after > 0) || std::abs(after / before - 1.0) > options.max_refine_change)
+    return reject(fmt::format("it moved the focal from {:.1f} to {:.1f} px, more than {:.0f}%",
+                              before * to_frames, after * to_frames,
+                              100 * options.max_refine_change));
+  spdlog::info("colmap: bundle adjustment refined the focal from {:.1f} to {:.1f} px",
+               before * to_frames, after * to_frames);
+  best.model = std::move(refined);
+  best.model_dir = out;
+  result.refined_focal = after * to_frames;
+  result.focal_method = "search+bundle_adjuster";
 }
 
 }  // namespace
@@ -270,10 +330,17 @@ ColmapResult run_colmap(const std::vector<ColmapFrame>& frames,
 
   // Fresh work directory content (only what this stage owns).
   fs::create_directories(work_dir);
-  for (const char* owned : {"colmap_images", "colmap_masks", "colmap.db", "colmap.db-shm",
-                            "colmap.db-wal", "colmap_sparse_0", "colmap_sparse_1",
-                            "colmap_sparse_0_txt", "colmap_sparse_1_txt", "colmap_model_txt"})
+  for (const char* owned :
+       {"colmap_images", "colmap_masks", "colmap.db", "colmap.db-shm", "colmap.db-wal",
+        "colmap_model_txt", "colmap_refined", "colmap_refined_txt"})
     fs::remove_all(work_dir / owned);
+  {
+    std::vector<fs::path> sparse_dirs;
+    for (const auto& e : fs::directory_iterator(work_dir))
+      if (e.path().filename().string().rfind("colmap_sparse_", 0) == 0)
+        sparse_dirs.push_back(e.path());
+    for (const auto& d : sparse_dirs) fs::remove_all(d);
+  }
   ColmapResult result;
   result.log_file = work_dir / "colmap.log";
   { std::ofstream truncate(result.log_file, std::ios::trunc); }
@@ -337,6 +404,13 @@ ColmapResult run_colmap(const std::vector<ColmapFrame>& frames,
       fe.insert(fe.end(), {"--ImageReader.camera_model", "PINHOLE", "--ImageReader.camera_params",
                            fmt::format("{:.6f},{:.6f},{:.6f},{:.6f}", k.fx, k.fy, k.cx, k.cy)});
     }
+  } else if (!options.focal_search_fov_deg.empty()) {
+    // The first candidate focal; the search edits it in the database between mapper runs.
+    fe.insert(
+        fe.end(),
+        {"--ImageReader.camera_model", "SIMPLE_PINHOLE", "--ImageReader.camera_params",
+         fmt::format("{:.6f},{:.6f},{:.6f}", focal_from_fov(cw, options.focal_search_fov_deg[0]),
+                     0.5 * cw, 0.5 * ch)});
   } else {
     fe.insert(fe.end(), {"--ImageReader.camera_model", "SIMPLE_PINHOLE"});
   }
@@ -366,7 +440,8 @@ ColmapResult run_colmap(const std::vector<ColmapFrame>& frames,
   const int required =
       std::min<int>(int(n), std::max<int>(options.min_registered_frames,
                                           int(std::ceil(options.min_registered_fraction * n))));
-  auto mapper_args = [&](bool relaxed) {
+  const bool search = !options.intrinsics && !options.focal_search_fov_deg.empty();
+  auto mapper_args = [&](bool relaxed, bool fixed_focal) {
     std::vector<std::string> a = {"--Mapper.num_threads",
                                   threads,
                                   "--Mapper.min_model_size",
@@ -374,7 +449,7 @@ ColmapResult run_colmap(const std::vector<ColmapFrame>& frames,
                                   "--Mapper.init_min_tri_angle",
                                   fmt::format("{}", relaxed ? options.relaxed_init_min_tri_angle
                                                             : options.init_min_tri_angle)};
-    if (options.intrinsics)
+    if (fixed_focal)
       a.insert(a.end(),
                {"--Mapper.ba_refine_focal_length", "0", "--Mapper.ba_refine_principal_point", "0",
                 "--Mapper.ba_refine_extra_params", "0"});
@@ -385,15 +460,91 @@ ColmapResult run_colmap(const std::vector<ColmapFrame>& frames,
                 "0.15", "--Mapper.min_num_matches", "10", "--Mapper.init_max_error", "6"});
     return a;
   };
+  // Candidate focals at COLMAP's resolution. Without libsqlite3 the database cannot be edited,
+  // so only the first candidate (the extractor's initial value) is tried.
+  std::vector<double> candidates;
+  bool extend_search = true;
+  if (search) {
+    for (double fov : options.focal_search_fov_deg) candidates.push_back(focal_from_fov(cw, fov));
+    if (candidates.size() > 1 && !colmap_database_editable()) {
+      extend_search = false;
+      std::string w = fmt::format(
+          "libsqlite3 could not be loaded, so only the first candidate field of view ({} "
+          "degrees) is tried for the focal length",
+          options.focal_search_fov_deg[0]);
+      spdlog::warn("colmap: {}", w);
+      result.warnings.push_back(w);
+      candidates = std::vector<double>{candidates.front()};
+    }
+  }
+  const double to_frames = double(width) / cw;  // COLMAP's pixels -> the frames' pixels
   MapperAttempt best;
   int best_attempt = 0;
   const int max_attempts = options.retry_relaxed ? 2 : 1;
   for (int attempt = 0; attempt < max_attempts; ++attempt) {
-    MapperAttempt a = map_and_read(exe, work_dir, attempt, mapper_args(attempt > 0), result);
+    const bool relaxed = attempt > 0;
+    MapperAttempt a;
+    if (!search) {
+      a = map_and_read(exe, work_dir, std::to_string(attempt),
+                       mapper_args(relaxed, options.intrinsics.has_value()), result);
+    } else {
+      // One mapper run per candidate focal, held fixed; the best run is this attempt's result.
+      std::vector<FocalCandidate> scores;
+      std::vector<MapperAttempt> runs;
+      std::vector<double> tried = candidates;
+      int extensions = 0;
+      for (size_t c = 0; c < tried.size(); ++c) {
+        if (c > 0 || attempt > 0) set_colmap_database_focal(db, tried[c]);
+        auto t_c = Clock::now();
+        MapperAttempt run = map_and_read(exe, work_dir, fmt::format("{}_f{}", attempt, c),
+                                         mapper_args(relaxed, true), result);
+        FocalCandidate fc;
+        fc.focal_px = tried[c] * to_frames;
+        fc.fov_x_deg = fov_from_focal(cw, tried[c]);
+        fc.registered = int(run.model.images.size());
+        fc.num_models = run.num_models;
+        fc.points = int(run.model.points.size());
+        fc.mean_reprojection_error = mean_reprojection_error(run.model);
+        fc.seconds = seconds_since(t_c);
+        spdlog::info(
+            "colmap focal search{}: f = {:.1f} px (field of view {:.1f} deg): {} of {} frames, "
+            "{} model(s), {} points, mean reprojection error {:.3f} px",
+            relaxed ? " (relaxed)" : "", fc.focal_px, fc.fov_x_deg, fc.registered, n, fc.num_models,
+            fc.points, fc.mean_reprojection_error);
+        result.focal_candidates.push_back(fc);
+        scores.push_back(fc);
+        runs.push_back(std::move(run));
+        // A first candidate that cannot even initialise means too little parallax for the
+        // normal settings: go straight to the relaxed ones rather than trying the others.
+        if (c == 0 && !relaxed && attempt + 1 < max_attempts && fc.registered < required) break;
+        // When the best so far is the widest or narrowest field of view tried, one step beyond
+        // it (15 degrees, within 25..110) is tried too, at most twice.
+        if (c + 1 == tried.size() && extend_search && tried.size() > 1 && extensions < 2) {
+          int b = best_focal_candidate(scores);
+          if (b < 0) break;
+          double fov_b = scores[size_t(b)].fov_x_deg, lo = fov_b, hi = fov_b;
+          for (const auto& sc : scores) {
+            lo = std::min(lo, sc.fov_x_deg);
+            hi = std::max(hi, sc.fov_x_deg);
+          }
+          double next = fov_b <= lo + 1e-6 ? fov_b - 15.0 : fov_b >= hi - 1e-6 ? fov_b + 15.0 : 0;
+          if (next >= 25.0 && next <= 110.0) {
+            spdlog::info("colmap focal search: best at the edge ({:.1f} deg); also trying {:.1f}",
+                         fov_b, next);
+            tried.push_back(focal_from_fov(cw, next));
+            ++extensions;
+          }
+        }
+      }
+      int b = best_focal_candidate(scores);
+      if (b >= 0) {
+        a = std::move(runs[size_t(b)]);
+        result.searched_focal = scores[size_t(b)].focal_px;
+      }
+    }
     result.attempts = attempt + 1;
     spdlog::info("colmap mapper attempt {}{}: {} model(s), largest registers {} of {} frames",
-                 attempt + 1, attempt > 0 ? " (relaxed)" : "", a.num_models, a.model.images.size(),
-                 n);
+                 attempt + 1, relaxed ? " (relaxed)" : "", a.num_models, a.model.images.size(), n);
     if (a.model.images.size() > best.model.images.size() || attempt == 0) {
       best = std::move(a);
       best_attempt = attempt;
@@ -405,6 +556,12 @@ ColmapResult run_colmap(const std::vector<ColmapFrame>& frames,
   }
   spdlog::info("colmap: using attempt {}", best_attempt + 1);
   result.num_models = best.num_models;
+  if (search && !best.model.images.empty()) {
+    result.focal_method = "search";
+    if (options.refine_focal) refine_focal(exe, work_dir, options, to_frames, best, result);
+  } else if (!options.intrinsics) {
+    result.focal_method = "colmap";
+  }
 
   const int registered = int(best.model.images.size());
   if (registered == 0)
@@ -440,17 +597,18 @@ ColmapResult run_colmap(const std::vector<ColmapFrame>& frames,
   if (result.num_models > 1)
     spdlog::warn("colmap split the clip into {} models; using the largest ({} frames)",
                  result.num_models, registered);
+  if (result.num_models > 1 || !result.unregistered.empty()) {
+    // Already logged above; kept for the caller (run.json) too.
+    result.warnings.push_back(fmt::format(
+        "COLMAP split the clip into {} model(s) and registered {} of {} frames in the largest",
+        result.num_models, registered, n));
+  }
   if (!options.intrinsics) {
     for (const auto& [id, cam] : result.model.cameras) {
-      double fov = cam.intrinsics().fov_x_deg();
-      if (fov < 20.0 || fov > 130.0) {
-        std::string w = fmt::format(
-            "COLMAP estimated fx = {:.1f} px for width {} (horizontal field of view {:.1f} "
-            "degrees), which is implausible; give the intrinsics if they are known",
-            cam.intrinsics().fx, cam.width, fov);
-        spdlog::warn("{}", w);
-        result.warnings.push_back(w);
-      }
+      std::string w = implausible_focal_warning(cam.intrinsics().fx, cam.width, cam.height);
+      if (w.empty()) continue;
+      spdlog::warn("{}", w);
+      result.warnings.push_back(w);
     }
   }
   try {

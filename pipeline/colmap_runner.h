@@ -15,6 +15,10 @@
 //   4. mapper (focal length kept fixed when intrinsics are given); when it registers too few
 //      frames, the mapper is re-run once with relaxed thresholds and a small initial
 //      triangulation angle (short hand-held clips have little parallax);
+//      WITHOUT intrinsics the focal is searched (pipeline/intrinsics_focal_search.h): the mapper
+//      runs once per candidate field of view with the focal held fixed (the database's camera is
+//      edited in between; features and matches are reused), the best run is chosen, then
+//      bundle_adjuster refines the focal on that model (principal point fixed at the centre);
 //   5. model_converter to TXT for every model; the model with most registered frames is used.
 // Results are in the resolution of the frames given (intrinsics and 2-D observations are scaled
 // back from the downscaled copies).
@@ -27,6 +31,7 @@
 #include <opencv2/core.hpp>
 
 #include "pipeline/camera.h"
+#include "pipeline/intrinsics_focal_search.h"
 #include "pipeline/trajectory_io.h"
 
 namespace cvd {
@@ -62,6 +67,15 @@ struct ColmapOptions {
   double min_registered_fraction = 0.5;
   int min_registered_frames = 3;
   bool retry_relaxed = true;  // re-run the mapper once with relaxed settings before failing
+  // Without `intrinsics`: horizontal fields of view (degrees) tried with the focal held fixed,
+  // the first also being the camera's initial value. Empty = let COLMAP estimate the focal freely
+  // (unreliable on short clips: 2.4x too long on the 7-Scenes test clip). Measured in the README
+  // section "Camera intrinsics".
+  std::vector<double> focal_search_fov_deg = {60.0, 45.0, 75.0};  // + 15 deg steps past the edge
+  // After the search: bundle_adjuster with the focal free on the chosen model. A refined focal more
+  // than `max_refine_change` (relative) away from the searched one is rejected with a warning.
+  bool refine_focal = true;
+  double max_refine_change = 0.25;
 };
 
 struct ColmapResult {
@@ -74,7 +88,13 @@ struct ColmapResult {
   int attempts = 0;                       // mapper runs (2 when the relaxed retry was needed)
   double seconds = 0.0;                   // wall time of the whole stage
   std::vector<std::string> warnings;      // e.g. an implausible estimated field of view
-  std::filesystem::path log_file;         // COLMAP's captured output
+  // Focal estimation (only without given intrinsics): "search" (fixed-focal mapper runs),
+  // "search+bundle_adjuster" (then refined), or "colmap" (COLMAP's free focal, no search).
+  std::string focal_method;
+  std::vector<FocalCandidate> focal_candidates;  // one per mapper run of the search
+  double searched_focal = 0;  // focal of the chosen candidate, frames' resolution (0: no search)
+  double refined_focal = 0;   // after bundle_adjuster (0: not refined)
+  std::filesystem::path log_file;  // COLMAP's captured output
   // Wall time of each COLMAP command, in order, e.g. {"feature_extractor", 8.1}.
   std::vector<std::pair<std::string, double>> step_seconds;
 };

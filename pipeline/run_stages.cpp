@@ -2,6 +2,8 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cstring>
 #include <fstream>
@@ -12,6 +14,8 @@
 #include "engine/error.h"
 #include "pipeline/atomic_file.h"
 #include "pipeline/colmap_runner.h"
+#include "pipeline/exif_focal.h"
+#include "pipeline/intrinsics_focal_search.h"
 #include "pipeline/flow_dis.h"
 #include "pipeline/flow_flownet2.h"
 #include "pipeline/flow_io.h"
@@ -123,6 +127,38 @@ std::optional<Intrinsics> user_intrinsics(const RunOptions& o, const FramesStage
   return std::nullopt;
 }
 
+// The 35 mm equivalent focal written by the camera into the first JPEG of an image folder (video
+// containers carry no focal length that cvd can read). Intrinsics at the cached frames' size with
+// the principal point at the centre, or nullopt.
+std::optional<Intrinsics> exif_intrinsics(const RunOptions& o, const FramesStage& f,
+                                          double* focal_35mm) {
+  std::error_code ec;
+  if (!fs::is_directory(o.input, ec)) return std::nullopt;
+  std::vector<fs::path> jpegs;
+  for (const auto& e : fs::directory_iterator(o.input, ec)) {
+    std::string ext = e.path().extension().string();
+    for (auto& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    if (ext == ".jpg" || ext == ".jpeg") jpegs.push_back(e.path());
+  }
+  if (jpegs.empty()) return std::nullopt;
+  std::sort(jpegs.begin(), jpegs.end());
+  std::optional<double> f35 = read_exif_focal_35mm(jpegs.front());
+  if (!f35) return std::nullopt;
+  *focal_35mm = *f35;
+  // The equivalence is on the image diagonal of the input frames; scale to the cached frames.
+  double fx = focal_px_from_35mm(*f35, f.input_width, f.input_height) * f.width / f.input_width;
+  Intrinsics k{fx, fx, 0.5 * f.width - 0.5, 0.5 * f.height - 0.5, f.width, f.height};
+  std::string w = implausible_focal_warning(fx, f.width, f.height);
+  if (!w.empty()) {
+    spdlog::warn("poses: EXIF FocalLengthIn35mmFilm {} mm of {} ignored: {}", *f35,
+                 jpegs.front().string(), w);
+    return std::nullopt;
+  }
+  spdlog::info("poses: focal from EXIF of {}: {} mm (35 mm equivalent) = {:.1f} px",
+               jpegs.front().string(), *f35, fx);
+  return k;
+}
+
 std::vector<FrameCamera> cameras_from_file(const RunOptions& o, const FramesStage& f,
                                            const Intrinsics& K) {
   std::vector<Pose> poses;
@@ -167,8 +203,24 @@ PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::
   PosesStage st;
   st.cameras.resize(f.names.size());
   st.points.resize(f.names.size());
+  // Intrinsics in order of trust: the user's, the camera's EXIF focal, else estimated by the
+  // COLMAP focal search (pipeline/intrinsics_focal_search.h).
   std::optional<Intrinsics> K = user_intrinsics(o, f);
-  st.intrinsics_source = o.intrinsics ? "user (--intrinsics)" : (o.fov_deg > 0 ? "user (--fov)" : "estimated by COLMAP");
+  json intrinsics_info;
+  if (K) {
+    st.intrinsics_source = o.intrinsics ? "user (--intrinsics)" : "user (--fov)";
+    intrinsics_info = {{"source", o.intrinsics ? "user_intrinsics" : "user_fov"}};
+  } else {
+    double f35 = 0;
+    K = exif_intrinsics(o, f, &f35);
+    if (K) {
+      st.intrinsics_source = fmt::format("EXIF FocalLengthIn35mmFilm {} mm", f35);
+      intrinsics_info = {{"source", "exif"}, {"focal_35mm", f35}};
+    } else {
+      st.intrinsics_source = "estimated (COLMAP focal search)";
+      intrinsics_info = {{"source", "estimated"}};
+    }
+  }
   if (!o.poses_file.empty()) {
     if (!K)
       fail(ErrorCategory::invalid_argument,
@@ -188,6 +240,9 @@ PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::
     if (fs::exists(model_dir / "images.txt")) {
       model = read_colmap_text_model(model_dir);
       spdlog::info("poses: cached COLMAP model in {}", model_dir.string());
+      json cached = read_json_if(dir / "intrinsics_info.json");
+      if (cached.is_object() && cached.value("source", "") == intrinsics_info.value("source", ""))
+        intrinsics_info = cached;
     } else {
       report(o, "poses", 0, 1, "running COLMAP");
       std::vector<ColmapFrame> frames;
@@ -209,8 +264,23 @@ PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::
                      fmt::format("{}", fmt::join(r.unregistered, ", ")));
       model = r.model;
       st.info = {{"colmap_models", r.num_models}, {"colmap_attempts", r.attempts},
-                 {"colmap_seconds", r.seconds}, {"unregistered", r.unregistered}};
+                 {"colmap_seconds", r.seconds}, {"unregistered", r.unregistered},
+                 {"warnings", r.warnings}};
+      if (!K) {
+        json cands = json::array();
+        for (const auto& c : r.focal_candidates)
+          cands.push_back({{"focal_px", c.focal_px}, {"fov_x_deg", c.fov_x_deg},
+                           {"registered", c.registered}, {"models", c.num_models},
+                           {"points", c.points},
+                           {"mean_reprojection_error_px", c.mean_reprojection_error},
+                           {"seconds", c.seconds}});
+        intrinsics_info["method"] = r.focal_method;
+        intrinsics_info["candidates"] = cands;
+        intrinsics_info["searched_focal_px"] = r.searched_focal;
+        intrinsics_info["refined_focal_px"] = r.refined_focal;
+      }
       write_colmap_text_model(model_dir, model);
+      write_text_file(dir / "intrinsics_info.json", intrinsics_info.dump(1));
     }
     for (size_t k = 0; k < f.names.size(); ++k) {
       const ColmapImage* im = model.find_image(f.names[k]);
@@ -228,6 +298,17 @@ PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::
       if (!c.registered && K) c.intrinsics = *K;
     st.source = "colmap";
   }
+  for (const auto& c : st.cameras)
+    if (c.registered) {
+      intrinsics_info["fx"] = c.intrinsics.fx;
+      intrinsics_info["fy"] = c.intrinsics.fy;
+      intrinsics_info["cx"] = c.intrinsics.cx;
+      intrinsics_info["cy"] = c.intrinsics.cy;
+      intrinsics_info["resolution"] = {c.intrinsics.width, c.intrinsics.height};
+      intrinsics_info["fov_x_deg"] = c.intrinsics.fov_x_deg();
+      break;
+    }
+  st.info["intrinsics"] = intrinsics_info;
   int registered = 0;
   for (auto& c : st.cameras) registered += c.registered;
   CVD_CHECK(registered >= 2, "only {} frame(s) have poses; at least 2 are needed", registered);

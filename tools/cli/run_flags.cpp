@@ -21,8 +21,10 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s) {
   c->add_option("--width", o.width, "Width multiplier of the default network");
   c->add_option("--poses", o.poses_file, "Camera poses file instead of running COLMAP");
   c->add_option("--poses-format", o.poses_format, "Format of --poses")->check(CLI::IsMember({"tum", "colmap", "kitti"}));
-  c->add_option("--intrinsics", s.intrinsics, "Camera intrinsics fx,fy,cx,cy at the input resolution");
-  c->add_option("--fov", o.fov_deg, "Horizontal field of view in degrees (when intrinsics are unknown)");
+  c->add_option("--intrinsics", s.intrinsics,
+                 "Camera intrinsics fx,fy,cx,cy at the input resolution (most trusted; without it or "
+                 "--fov: the JPEG EXIF 35 mm focal, else a COLMAP focal search)");
+  c->add_option("--fov", o.fov_deg, "Horizontal field of view in degrees (when fx,fy,cx,cy are unknown)");
   c->add_option("--matcher", o.matcher, "COLMAP matcher")->check(CLI::IsMember({"sequential", "exhaustive"}));
   c->add_option("--colmap-size", o.colmap_long_side, "Long side of the frames COLMAP sees");
   c->add_option("--colmap-features", o.colmap_max_features, "Max SIFT features per frame for COLMAP");

@@ -100,14 +100,14 @@ void run(const Tensor& root, const Tensor& seed_in, bool retain_graph,
     grads.erase(node.get());
     std::vector<Tensor> gin;
     if (g.defined()) {
-    if (!node->backward) {
-      fail(ErrorCategory::invalid_argument,
-           "backward through '{}' whose graph was already freed (pass retain_graph=true to "
-           "backward twice)",
-           node->name);
-    }
-    gin = node->backward(g, node->needs_grad);
-    CVD_ASSERT(gin.size() <= node->next.size());
+      if (!node->backward) {
+        fail(ErrorCategory::invalid_argument,
+             "backward through '{}' whose graph was already freed (pass retain_graph=true to "
+             "backward twice)",
+             node->name);
+      }
+      gin = node->backward(g, node->needs_grad);
+      CVD_ASSERT(gin.size() <= node->next.size());
     }
     gin.resize(node->next.size());
     for (size_t i = 0; i < node->next.size(); ++i) {
@@ -116,8 +116,9 @@ void run(const Tensor& root, const Tensor& seed_in, bool retain_graph,
       if (e.fn) {
         if (gin[i].defined()) {
           if (gin[i].shape() != e.fn->out_shape)
-            fail(ErrorCategory::internal, "backward of '{}' returned gradient {} for input {} of shape {}",
-                 node->name, shape_str(gin[i].shape()), i, shape_str(e.fn->out_shape));
+            fail(ErrorCategory::internal,
+                 "backward of '{}' returned gradient {} for input {} of shape {}", node->name,
+                 shape_str(gin[i].shape()), i, shape_str(e.fn->out_shape));
           grads[e.fn.get()] = accumulate(grads[e.fn.get()], gin[i]);
         }
         // Every node is visited once all its consumers are done, with or without a gradient,
@@ -125,8 +126,9 @@ void run(const Tensor& root, const Tensor& seed_in, bool retain_graph,
         if (--deps[e.fn.get()] == 0) ready.push_back(e.fn);
       } else if (gin[i].defined()) {
         if (gin[i].shape() != e.leaf->shape)
-          fail(ErrorCategory::internal, "backward of '{}' returned gradient {} for a leaf of shape {}",
-               node->name, shape_str(gin[i].shape()), shape_str(e.leaf->shape));
+          fail(ErrorCategory::internal,
+               "backward of '{}' returned gradient {} for a leaf of shape {}", node->name,
+               shape_str(gin[i].shape()), shape_str(e.leaf->shape));
         deliver_leaf(e.leaf, gin[i]);
       }
     }

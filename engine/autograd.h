@@ -11,21 +11,21 @@
 namespace cvd {
 
 struct Edge {
-  std::shared_ptr<Node> fn;            // the input was produced by this node ...
-  std::shared_ptr<TensorImpl> leaf;    // ... or is a leaf that accumulates its gradient
+  std::shared_ptr<Node> fn;          // the input was produced by this node ...
+  std::shared_ptr<TensorImpl> leaf;  // ... or is a leaf that accumulates its gradient
   bool active() const { return fn || leaf; }
 };
 
 // Backward function: given d(loss)/d(output) returns d(loss)/d(input_i) for every input (an
 // undefined Tensor where needs_grad[i] is false or the gradient is zero). It runs with grad mode
 // off, so it may use any engine op.
-using BackwardFn = std::function<std::vector<Tensor>(const Tensor& grad_out,
-                                                     const std::vector<bool>& needs_grad)>;
+using BackwardFn =
+    std::function<std::vector<Tensor>(const Tensor& grad_out, const std::vector<bool>& needs_grad)>;
 
 struct Node {
   std::string name;
-  std::vector<Edge> next;       // one per input
-  std::vector<bool> needs_grad; // one per input
+  std::vector<Edge> next;        // one per input
+  std::vector<bool> needs_grad;  // one per input
   Shape out_shape;
   DType out_dtype = DType::f32;
   BackwardFn backward;

@@ -9,41 +9,41 @@
 
 namespace cvd {
 
-#define CVD_KERNEL_OPS(X)                                                             \
-  X(copy)                /* in: src (any strides/dtype); out: dst (contiguous)    */   \
-  X(fill)                /* out: dst; params FillParams                          */   \
-  X(unary)               /* in: x; out: y; UnaryParams                           */   \
-  X(unary_backward)      /* in: gy, x, y; out: gx; UnaryParams                   */   \
-  X(binary)              /* in: a, b (broadcast views); out: c; BinaryParams     */   \
-  X(where)               /* in: cond, a, b (broadcast views); out: c             */   \
-  X(reduce_sum)          /* in: x (contiguous); out: y; ReduceParams             */   \
-  X(concat)              /* in: x0..xn; out: y; ConcatParams                     */   \
-  X(pad)                 /* in: x; out: y; PadParams                             */   \
-  X(conv2d)              /* in: x, w, [b]; out: y; Conv2dParams                  */   \
-  X(conv2d_backward_data)   /* in: gy, w; out: gx; Conv2dParams                  */   \
-  X(conv2d_backward_weight) /* in: gy, x; out: gw, [gb]; Conv2dParams            */   \
-  X(conv_transpose2d)                 /* in: x, w, [b]; out: y; ConvT2dParams    */   \
-  X(conv_transpose2d_backward_data)   /* in: gy, w; out: gx                      */   \
-  X(conv_transpose2d_backward_weight) /* in: gy, x; out: gw, [gb]                */   \
-  X(batch_norm)          /* in: x, gamma?, beta?, rmean, rvar; out: y, mean, invstd */ \
-  X(batch_norm_backward) /* in: gy, x, gamma?, mean, invstd; out: gx, ggamma?, gbeta? */ \
-  X(max_pool2d)          /* in: x; out: y; Pool2dParams                          */   \
-  X(max_pool2d_backward) /* in: gy, x; out: gx                                   */   \
-  X(avg_pool2d)          /* in: x; out: y                                        */   \
-  X(avg_pool2d_backward) /* in: gy; out: gx                                      */   \
-  X(upsample_bilinear2d)          /* in: x; out: y; UpsampleParams               */   \
-  X(upsample_bilinear2d_backward) /* in: gy; out: gx                             */   \
-  X(upsample_nearest2d)           /* in: x; out: y                               */   \
-  X(upsample_nearest2d_backward)  /* in: gy; out: gx                             */   \
-  X(matmul)              /* in: a [B,M,K], b [B,K,N]; out: c [B,M,N]; MatmulParams */ \
-  X(grid_sample)         /* in: x, grid; out: y; GridSampleParams                */   \
-  X(grid_sample_backward)/* in: gy, x, grid; out: gx, ggrid                      */   \
-  X(adam_update)         /* in: param, grad, m, v (updated in place); AdamParams */   \
-  X(sgd_update)          /* in: param, grad, buf (updated in place); SgdParams   */   \
-  X(correlation)         /* in: a, b; out: y; CorrelationParams                  */   \
-  X(correlation_backward)/* in: gy, a, b; out: ga?, gb?; CorrelationParams       */   \
-  X(channel_norm)        /* in: x; out: y [N,1,H,W]                              */   \
-  X(channel_norm_backward) /* in: gy, x, y; out: gx                              */
+#define CVD_KERNEL_OPS(X)                                                                         \
+  X(copy)                             /* in: src (any strides/dtype); out: dst (contiguous)    */ \
+  X(fill)                             /* out: dst; params FillParams                          */  \
+  X(unary)                            /* in: x; out: y; UnaryParams                           */  \
+  X(unary_backward)                   /* in: gy, x, y; out: gx; UnaryParams                   */  \
+  X(binary)                           /* in: a, b (broadcast views); out: c; BinaryParams     */  \
+  X(where)                            /* in: cond, a, b (broadcast views); out: c             */  \
+  X(reduce_sum)                       /* in: x (contiguous); out: y; ReduceParams             */  \
+  X(concat)                           /* in: x0..xn; out: y; ConcatParams                     */  \
+  X(pad)                              /* in: x; out: y; PadParams                             */  \
+  X(conv2d)                           /* in: x, w, [b]; out: y; Conv2dParams                  */  \
+  X(conv2d_backward_data)             /* in: gy, w; out: gx; Conv2dParams                  */     \
+  X(conv2d_backward_weight)           /* in: gy, x; out: gw, [gb]; Conv2dParams            */     \
+  X(conv_transpose2d)                 /* in: x, w, [b]; out: y; ConvT2dParams    */               \
+  X(conv_transpose2d_backward_data)   /* in: gy, w; out: gx                      */               \
+  X(conv_transpose2d_backward_weight) /* in: gy, x; out: gw, [gb]                */               \
+  X(batch_norm)                   /* in: x, gamma?, beta?, rmean, rvar; out: y, mean, invstd */   \
+  X(batch_norm_backward)          /* in: gy, x, gamma?, mean, invstd; out: gx, ggamma?, gbeta? */ \
+  X(max_pool2d)                   /* in: x; out: y; Pool2dParams                          */      \
+  X(max_pool2d_backward)          /* in: gy, x; out: gx                                   */      \
+  X(avg_pool2d)                   /* in: x; out: y                                        */      \
+  X(avg_pool2d_backward)          /* in: gy; out: gx                                      */      \
+  X(upsample_bilinear2d)          /* in: x; out: y; UpsampleParams               */               \
+  X(upsample_bilinear2d_backward) /* in: gy; out: gx                             */               \
+  X(upsample_nearest2d)           /* in: x; out: y                               */               \
+  X(upsample_nearest2d_backward)  /* in: gy; out: gx                             */               \
+  X(matmul)                       /* in: a [B,M,K], b [B,K,N]; out: c [B,M,N]; MatmulParams */    \
+  X(grid_sample)                  /* in: x, grid; out: y; GridSampleParams                */      \
+  X(grid_sample_backward)         /* in: gy, x, grid; out: gx, ggrid                      */      \
+  X(adam_update)                  /* in: param, grad, m, v (updated in place); AdamParams */      \
+  X(sgd_update)                   /* in: param, grad, buf (updated in place); SgdParams   */      \
+  X(correlation)                  /* in: a, b; out: y; CorrelationParams                  */      \
+  X(correlation_backward)         /* in: gy, a, b; out: ga?, gb?; CorrelationParams       */      \
+  X(channel_norm)                 /* in: x; out: y [N,1,H,W]                              */      \
+  X(channel_norm_backward)        /* in: gy, x, y; out: gx                              */
 
 enum class OpId : int {
 #define CVD_X(name) name,

@@ -39,14 +39,14 @@ template <class... Args>
 }  // namespace cvd
 
 // Argument checks: CVD_CHECK(cond, "fmt {}", args...) throws Error(invalid_argument).
-#define CVD_CHECK(cond, ...)                                                        \
-  do {                                                                              \
+#define CVD_CHECK(cond, ...)                                                       \
+  do {                                                                             \
     if (!(cond)) ::cvd::fail(::cvd::ErrorCategory::invalid_argument, __VA_ARGS__); \
   } while (0)
 // Internal invariants: a failure is a bug in cvd.
-#define CVD_ASSERT(cond)                                                                     \
-  do {                                                                                       \
-    if (!(cond))                                                                             \
+#define CVD_ASSERT(cond)                                                                       \
+  do {                                                                                         \
+    if (!(cond))                                                                               \
       ::cvd::fail(::cvd::ErrorCategory::internal, "internal error: {} failed at {}:{}", #cond, \
-                  __FILE__, __LINE__);                                                       \
+                  __FILE__, __LINE__);                                                         \
   } while (0)

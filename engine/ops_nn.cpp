@@ -26,8 +26,9 @@ Tensor conv2d(const Tensor& x_in, const Tensor& w_in, const Tensor& b_in, const 
   check_same_kind("conv2d", x_in, b_in);
   CVD_CHECK(x_in.dim() == 4 && w_in.dim() == 4, "conv2d: x {} and w {} must be 4-d", x_in.str(),
             w_in.str());
-  CVD_CHECK(p.groups >= 1 && x_in.size(1) == w_in.size(1) * p.groups && w_in.size(0) % p.groups == 0,
-            "conv2d: x {} does not match weight {} with groups {}", x_in.str(), w_in.str(), p.groups);
+  CVD_CHECK(
+      p.groups >= 1 && x_in.size(1) == w_in.size(1) * p.groups && w_in.size(0) % p.groups == 0,
+      "conv2d: x {} does not match weight {} with groups {}", x_in.str(), w_in.str(), p.groups);
   CVD_CHECK(!b_in.defined() || (b_in.dim() == 1 && b_in.size(0) == w_in.size(0)),
             "conv2d: bias {} does not match weight {}", b_in.str(), w_in.str());
   CVD_CHECK(p.stride_h >= 1 && p.stride_w >= 1 && p.dilation_h >= 1 && p.dilation_w >= 1,
@@ -82,25 +83,24 @@ Tensor conv_transpose2d(const Tensor& x_in, const Tensor& w_in, const Tensor& b_
   Tensor y = empty_like_kind({x.size(0), oc, oh, ow}, x);
   dispatch(OpId::conv_transpose2d, x, KernelArgs{{x, w, b}, {y}, &p});
   if (!any_requires_grad({x, w, b})) return y;
-  return record("conv_transpose2d", y, {x, w, b},
-                [xs = x.detach(), ws = w.detach(), has_b = b.defined(), oc, p](
-                    const Tensor& g_in, const std::vector<bool>& need) {
-                  Tensor g = g_in.contiguous();
-                  Tensor gx, gw, gb;
-                  if (need[0]) {
-                    gx = empty_like_kind(xs.shape(), xs);
-                    dispatch(OpId::conv_transpose2d_backward_data, g,
-                             KernelArgs{{g, ws}, {gx}, &p});
-                  }
-                  if (need[1] || (has_b && need[2])) {
-                    gw = empty_like_kind(ws.shape(), ws);
-                    if (has_b && need[2]) gb = empty_like_kind({oc}, ws);
-                    dispatch(OpId::conv_transpose2d_backward_weight, g,
-                             KernelArgs{{g, xs}, {gw, gb}, &p});
-                    if (!need[1]) gw = Tensor();
-                  }
-                  return std::vector<Tensor>{gx, gw, gb};
-                });
+  return record(
+      "conv_transpose2d", y, {x, w, b},
+      [xs = x.detach(), ws = w.detach(), has_b = b.defined(), oc, p](
+          const Tensor& g_in, const std::vector<bool>& need) {
+        Tensor g = g_in.contiguous();
+        Tensor gx, gw, gb;
+        if (need[0]) {
+          gx = empty_like_kind(xs.shape(), xs);
+          dispatch(OpId::conv_transpose2d_backward_data, g, KernelArgs{{g, ws}, {gx}, &p});
+        }
+        if (need[1] || (has_b && need[2])) {
+          gw = empty_like_kind(ws.shape(), ws);
+          if (has_b && need[2]) gb = empty_like_kind({oc}, ws);
+          dispatch(OpId::conv_transpose2d_backward_weight, g, KernelArgs{{g, xs}, {gw, gb}, &p});
+          if (!need[1]) gw = Tensor();
+        }
+        return std::vector<Tensor>{gx, gw, gb};
+      });
 }
 
 // ---- batch_norm ------------------------------------------------------------------------------
@@ -124,28 +124,28 @@ Tensor batch_norm(const Tensor& x_in, const Tensor& running_mean, const Tensor& 
          beta = contiguous_or_undefined(beta_in);
   Tensor y = empty_like_kind(x.shape(), x);
   Tensor mean = empty_like_kind({c}, x), invstd = empty_like_kind({c}, x);
-  dispatch(OpId::batch_norm, x,
-           KernelArgs{{x, gamma, beta, running_mean.detach(), running_var.detach()},
-                      {y, mean, invstd},
-                      &p});
+  dispatch(
+      OpId::batch_norm, x,
+      KernelArgs{
+          {x, gamma, beta, running_mean.detach(), running_var.detach()}, {y, mean, invstd}, &p});
   if (p.training) {
     running_mean.bump_version();
     running_var.bump_version();
   }
   if (!any_requires_grad({x, gamma, beta})) return y;
-  return record("batch_norm", y, {x, gamma, beta},
-                [xs = x.detach(), gs = gamma.defined() ? gamma.detach() : Tensor(),
-                 has_beta = beta.defined(), mean, invstd, p](const Tensor& g_in,
-                                                             const std::vector<bool>& need) {
-                  Tensor g = g_in.contiguous();
-                  int64_t c = xs.size(1);
-                  Tensor gx = need[0] ? empty_like_kind(xs.shape(), xs) : Tensor();
-                  Tensor gg = gs.defined() && need[1] ? empty_like_kind({c}, xs) : Tensor();
-                  Tensor gb = has_beta && need[2] ? empty_like_kind({c}, xs) : Tensor();
-                  dispatch(OpId::batch_norm_backward, g,
-                           KernelArgs{{g, xs, gs, mean, invstd}, {gx, gg, gb}, &p});
-                  return std::vector<Tensor>{gx, gg, gb};
-                });
+  return record(
+      "batch_norm", y, {x, gamma, beta},
+      [xs = x.detach(), gs = gamma.defined() ? gamma.detach() : Tensor(), has_beta = beta.defined(),
+       mean, invstd, p](const Tensor& g_in, const std::vector<bool>& need) {
+        Tensor g = g_in.contiguous();
+        int64_t c = xs.size(1);
+        Tensor gx = need[0] ? empty_like_kind(xs.shape(), xs) : Tensor();
+        Tensor gg = gs.defined() && need[1] ? empty_like_kind({c}, xs) : Tensor();
+        Tensor gb = has_beta && need[2] ? empty_like_kind({c}, xs) : Tensor();
+        dispatch(OpId::batch_norm_backward, g,
+                 KernelArgs{{g, xs, gs, mean, invstd}, {gx, gg, gb}, &p});
+        return std::vector<Tensor>{gx, gg, gb};
+      });
 }
 
 // ---- pooling ---------------------------------------------------------------------------------
@@ -156,8 +156,10 @@ static Shape pool_shape(const Tensor& x, const Pool2dParams& p, const char* op) 
   CVD_CHECK(p.pad_top <= p.kernel_h / 2 && p.pad_left <= p.kernel_w / 2 &&
                 p.pad_bottom <= p.kernel_h / 2 && p.pad_right <= p.kernel_w / 2,
             "{}: padding must be at most half the kernel", op);
-  int64_t oh = pool_out_size(x.size(2), p.kernel_h, p.stride_h, p.pad_top, p.pad_bottom, p.ceil_mode);
-  int64_t ow = pool_out_size(x.size(3), p.kernel_w, p.stride_w, p.pad_left, p.pad_right, p.ceil_mode);
+  int64_t oh =
+      pool_out_size(x.size(2), p.kernel_h, p.stride_h, p.pad_top, p.pad_bottom, p.ceil_mode);
+  int64_t ow =
+      pool_out_size(x.size(3), p.kernel_w, p.stride_w, p.pad_left, p.pad_right, p.ceil_mode);
   CVD_CHECK(oh > 0 && ow > 0, "{}: input {} too small", op, x.str());
   return {x.size(0), x.size(1), oh, ow};
 }
@@ -191,8 +193,8 @@ Tensor avg_pool2d(const Tensor& x_in, const Pool2dParams& p) {
 }
 
 // ---- resizing --------------------------------------------------------------------------------
-static Tensor upsample(const Tensor& x_in, int64_t oh, int64_t ow, bool align_corners,
-                       OpId fwd, OpId bwd, const char* name) {
+static Tensor upsample(const Tensor& x_in, int64_t oh, int64_t ow, bool align_corners, OpId fwd,
+                       OpId bwd, const char* name) {
   CVD_CHECK(x_in.dim() == 4, "{}: x {} must be 4-d", name, x_in.str());
   CVD_CHECK(oh > 0 && ow > 0, "{}: output size {}x{} must be positive", name, oh, ow);
   Tensor x = x_in.contiguous();
@@ -255,15 +257,15 @@ Tensor matmul(const Tensor& a_in, const Tensor& b_in) {
   }
   if (!any_requires_grad({a, b})) return c;
   Tensor c3 = c.reshape({a.size(0), a.size(1), b.size(2)});
-  Tensor r = record("matmul", c3, {a, b},
-                    [as = a.detach(), bs = b.detach()](const Tensor& g_in,
-                                                       const std::vector<bool>& need) {
-                      Tensor g = g_in.contiguous();
-                      Tensor ga, gb;
-                      if (need[0]) ga = matmul3(g, bs, false, true);
-                      if (need[1]) gb = matmul3(as, g, true, false);
-                      return std::vector<Tensor>{ga, gb};
-                    });
+  Tensor r =
+      record("matmul", c3, {a, b},
+             [as = a.detach(), bs = b.detach()](const Tensor& g_in, const std::vector<bool>& need) {
+               Tensor g = g_in.contiguous();
+               Tensor ga, gb;
+               if (need[0]) ga = matmul3(g, bs, false, true);
+               if (need[1]) gb = matmul3(as, g, true, false);
+               return std::vector<Tensor>{ga, gb};
+             });
   return r.reshape(out);
 }
 
@@ -285,15 +287,15 @@ Tensor grid_sample(const Tensor& x_in, const Tensor& grid_in, const GridSamplePa
   Tensor y = empty_like_kind({x.size(0), x.size(1), grid.size(1), grid.size(2)}, x);
   dispatch(OpId::grid_sample, x, KernelArgs{{x, grid}, {y}, &p});
   if (!any_requires_grad({x, grid})) return y;
-  return record("grid_sample", y, {x, grid},
-                [xs = x.detach(), gs = grid.detach(), p](const Tensor& g_in,
-                                                         const std::vector<bool>& need) {
-                  Tensor g = g_in.contiguous();
-                  Tensor gx = need[0] ? empty_like_kind(xs.shape(), xs) : Tensor();
-                  Tensor gg = need[1] ? empty_like_kind(gs.shape(), gs) : Tensor();
-                  dispatch(OpId::grid_sample_backward, g, KernelArgs{{g, xs, gs}, {gx, gg}, &p});
-                  return std::vector<Tensor>{gx, gg};
-                });
+  return record(
+      "grid_sample", y, {x, grid},
+      [xs = x.detach(), gs = grid.detach(), p](const Tensor& g_in, const std::vector<bool>& need) {
+        Tensor g = g_in.contiguous();
+        Tensor gx = need[0] ? empty_like_kind(xs.shape(), xs) : Tensor();
+        Tensor gg = need[1] ? empty_like_kind(gs.shape(), gs) : Tensor();
+        dispatch(OpId::grid_sample_backward, g, KernelArgs{{g, xs, gs}, {gx, gg}, &p});
+        return std::vector<Tensor>{gx, gg};
+      });
 }
 
 }  // namespace cvd

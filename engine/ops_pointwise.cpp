@@ -8,20 +8,34 @@ using detail::empty_like_kind;
 
 static const char* unary_name(UnaryOp op) {
   switch (op) {
-    case UnaryOp::relu: return "relu";
-    case UnaryOp::clip: return "clip";
-    case UnaryOp::leaky_relu: return "leaky_relu";
-    case UnaryOp::sigmoid: return "sigmoid";
-    case UnaryOp::tanh: return "tanh";
-    case UnaryOp::exp: return "exp";
-    case UnaryOp::log: return "log";
-    case UnaryOp::abs: return "abs";
-    case UnaryOp::sqrt: return "sqrt";
-    case UnaryOp::neg: return "neg";
-    case UnaryOp::reciprocal: return "reciprocal";
-    case UnaryOp::pow_scalar: return "pow";
-    case UnaryOp::mul_scalar: return "mul_scalar";
-    case UnaryOp::add_scalar: return "add_scalar";
+    case UnaryOp::relu:
+      return "relu";
+    case UnaryOp::clip:
+      return "clip";
+    case UnaryOp::leaky_relu:
+      return "leaky_relu";
+    case UnaryOp::sigmoid:
+      return "sigmoid";
+    case UnaryOp::tanh:
+      return "tanh";
+    case UnaryOp::exp:
+      return "exp";
+    case UnaryOp::log:
+      return "log";
+    case UnaryOp::abs:
+      return "abs";
+    case UnaryOp::sqrt:
+      return "sqrt";
+    case UnaryOp::neg:
+      return "neg";
+    case UnaryOp::reciprocal:
+      return "reciprocal";
+    case UnaryOp::pow_scalar:
+      return "pow";
+    case UnaryOp::mul_scalar:
+      return "mul_scalar";
+    case UnaryOp::add_scalar:
+      return "add_scalar";
   }
   return "unary";
 }
@@ -84,42 +98,49 @@ static Tensor binary(const Tensor& a, const Tensor& b, BinaryOp op, const char* 
   Shape out = broadcast_shapes(a.shape(), b.shape());
   Tensor c = binary_raw(a, b, op, out);
   if (!any_requires_grad({a, b})) return c;
-  return record(name, c, {a, b},
-                [as = a.detach(), bs = b.detach(), op](const Tensor& g,
-                                                       const std::vector<bool>& need) {
-                  Tensor ga, gb;
-                  switch (op) {
-                    case BinaryOp::add:
-                      ga = g;
-                      gb = g;
-                      break;
-                    case BinaryOp::sub:
-                      ga = g;
-                      if (need[1]) gb = neg(g);
-                      break;
-                    case BinaryOp::mul:
-                      if (need[0]) ga = mul(g, bs);
-                      if (need[1]) gb = mul(g, as);
-                      break;
-                    case BinaryOp::div:
-                      if (need[0]) ga = div(g, bs);
-                      if (need[1]) gb = neg(div(mul(g, as), mul(bs, bs)));
-                      break;
-                    case BinaryOp::minimum:
-                    case BinaryOp::maximum: {
-                      // The gradient goes to a where a wins (ties: a), else to b.
-                      Tensor a_wins = op == BinaryOp::minimum ? le(as, bs) : ge(as, bs);
-                      Tensor zero = Tensor::zeros({}, g.dtype(), g.device());
-                      if (need[0]) ga = where(a_wins, g, zero);
-                      if (need[1]) gb = where(a_wins, zero, g);
-                      break;
-                    }
-                    default: break;
-                  }
-                  if (ga.defined() && need[0]) ga = sum_to(ga, as.shape()); else ga = Tensor();
-                  if (gb.defined() && need[1]) gb = sum_to(gb, bs.shape()); else gb = Tensor();
-                  return std::vector<Tensor>{ga, gb};
-                });
+  return record(
+      name, c, {a, b},
+      [as = a.detach(), bs = b.detach(), op](const Tensor& g, const std::vector<bool>& need) {
+        Tensor ga, gb;
+        switch (op) {
+          case BinaryOp::add:
+            ga = g;
+            gb = g;
+            break;
+          case BinaryOp::sub:
+            ga = g;
+            if (need[1]) gb = neg(g);
+            break;
+          case BinaryOp::mul:
+            if (need[0]) ga = mul(g, bs);
+            if (need[1]) gb = mul(g, as);
+            break;
+          case BinaryOp::div:
+            if (need[0]) ga = div(g, bs);
+            if (need[1]) gb = neg(div(mul(g, as), mul(bs, bs)));
+            break;
+          case BinaryOp::minimum:
+          case BinaryOp::maximum: {
+            // The gradient goes to a where a wins (ties: a), else to b.
+            Tensor a_wins = op == BinaryOp::minimum ? le(as, bs) : ge(as, bs);
+            Tensor zero = Tensor::zeros({}, g.dtype(), g.device());
+            if (need[0]) ga = where(a_wins, g, zero);
+            if (need[1]) gb = where(a_wins, zero, g);
+            break;
+          }
+          default:
+            break;
+        }
+        if (ga.defined() && need[0])
+          ga = sum_to(ga, as.shape());
+        else
+          ga = Tensor();
+        if (gb.defined() && need[1])
+          gb = sum_to(gb, bs.shape());
+        else
+          gb = Tensor();
+        return std::vector<Tensor>{ga, gb};
+      });
 }
 
 Tensor add(const Tensor& a, const Tensor& b) { return binary(a, b, BinaryOp::add, "add"); }

@@ -100,15 +100,15 @@ Tensor narrow(const Tensor& x, int dim, int64_t start, int64_t length) {
   s[d] = length;
   Tensor y = make_view(x, s, x.strides(), x.offset() + start * x.stride(d));
   if (!any_requires_grad({x})) return y;
-  return record("narrow", y, {x},
-                [d, start, length, full = x.size(d), n = x.dim()](const Tensor& g,
-                                                                   const std::vector<bool>&) {
-                  std::vector<int64_t> pads(2 * n, 0);
-                  int k = n - 1 - d;  // F.pad order: last dim first
-                  pads[2 * k] = start;
-                  pads[2 * k + 1] = full - start - length;
-                  return std::vector<Tensor>{pad(g, pads, 0.0)};
-                });
+  return record(
+      "narrow", y, {x},
+      [d, start, length, full = x.size(d), n = x.dim()](const Tensor& g, const std::vector<bool>&) {
+        std::vector<int64_t> pads(2 * n, 0);
+        int k = n - 1 - d;  // F.pad order: last dim first
+        pads[2 * k] = start;
+        pads[2 * k + 1] = full - start - length;
+        return std::vector<Tensor>{pad(g, pads, 0.0)};
+      });
 }
 
 Tensor expand(const Tensor& x, const Shape& shape) {
@@ -146,17 +146,15 @@ Tensor contiguous(const Tensor& x) {
   if (x.is_contiguous()) return x;
   Tensor y = copy_to_new(x, x.dtype());
   if (!any_requires_grad({x})) return y;
-  return record("contiguous", y, {x}, [](const Tensor& g, const std::vector<bool>&) {
-    return std::vector<Tensor>{g};
-  });
+  return record("contiguous", y, {x},
+                [](const Tensor& g, const std::vector<bool>&) { return std::vector<Tensor>{g}; });
 }
 
 Tensor Tensor::clone() const {
   Tensor y = copy_to_new(*this, dtype());
   if (!any_requires_grad({*this})) return y;
-  return record("clone", y, {*this}, [](const Tensor& g, const std::vector<bool>&) {
-    return std::vector<Tensor>{g};
-  });
+  return record("clone", y, {*this},
+                [](const Tensor& g, const std::vector<bool>&) { return std::vector<Tensor>{g}; });
 }
 
 Tensor Tensor::to(DType t) const {
@@ -175,9 +173,10 @@ Tensor Tensor::to(Device d) const {
   if (d == device()) return *this;
   Tensor y = device_copy(contiguous(), d);
   if (!any_requires_grad({*this})) return y;
-  return record("to_device", y, {*this}, [src = device()](const Tensor& g, const std::vector<bool>&) {
-    return std::vector<Tensor>{g.to(src)};
-  });
+  return record("to_device", y, {*this},
+                [src = device()](const Tensor& g, const std::vector<bool>&) {
+                  return std::vector<Tensor>{g.to(src)};
+                });
 }
 
 Tensor concat(const std::vector<Tensor>& xs_in, int dim) {

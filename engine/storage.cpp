@@ -38,7 +38,9 @@ Allocator* device_allocator(Device d) {
   return g_device_allocators[static_cast<int>(d.type)];
 }
 
-void set_device_allocator(DeviceType t, Allocator* a) { g_device_allocators[static_cast<int>(t)] = a; }
+void set_device_allocator(DeviceType t, Allocator* a) {
+  g_device_allocators[static_cast<int>(t)] = a;
+}
 
 Storage::Storage(size_t nbytes, Allocator* alloc)
     : nbytes_(nbytes), device_(alloc->device()), alloc_(alloc), id_(g_next_storage_id++) {
@@ -46,7 +48,10 @@ Storage::Storage(size_t nbytes, Allocator* alloc)
 }
 
 Storage::Storage(void* data, size_t nbytes, Device device, std::function<void()> release)
-    : data_(data), nbytes_(nbytes), device_(device), release_(std::move(release)),
+    : data_(data),
+      nbytes_(nbytes),
+      device_(device),
+      release_(std::move(release)),
       id_(g_next_storage_id++) {}
 
 Storage::~Storage() {

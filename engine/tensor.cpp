@@ -49,7 +49,9 @@ Tensor Tensor::empty(const Shape& shape, DType dtype, Device device) {
   check_shape(shape);
   if (!device.is_cpu()) kernel_registry();  // registers the device allocators
   Allocator* a = device_allocator(device);
-  if (!a) fail(ErrorCategory::unsupported, "device {} is not available in this build or machine", device.str());
+  if (!a)
+    fail(ErrorCategory::unsupported, "device {} is not available in this build or machine",
+         device.str());
   auto impl = std::make_shared<TensorImpl>();
   impl->storage = std::make_shared<Storage>(shape_numel(shape) * dtype_size(dtype), a);
   impl->shape = shape;

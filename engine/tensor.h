@@ -26,12 +26,12 @@ class Generator;
 struct TensorImpl {
   std::shared_ptr<Storage> storage;
   Shape shape;
-  Shape strides;  // in elements
+  Shape strides;       // in elements
   int64_t offset = 0;  // in elements
   DType dtype = DType::f32;
   bool requires_grad = false;
-  std::shared_ptr<TensorImpl> grad;   // accumulated gradient (leaves)
-  std::shared_ptr<Node> grad_fn;      // the node that produced this tensor (non-leaves)
+  std::shared_ptr<TensorImpl> grad;  // accumulated gradient (leaves)
+  std::shared_ptr<Node> grad_fn;     // the node that produced this tensor (non-leaves)
 };
 
 class Tensor {
@@ -66,7 +66,7 @@ class Tensor {
   const Shape& shape() const { return impl()->shape; }
   const Shape& strides() const { return impl()->strides; }
   int dim() const { return static_cast<int>(impl()->shape.size()); }
-  int64_t size(int d) const;    // negative d counts from the end
+  int64_t size(int d) const;  // negative d counts from the end
   int64_t stride(int d) const;
   int64_t numel() const { return shape_numel(impl()->shape); }
   int64_t offset() const { return impl()->offset; }
@@ -95,7 +95,7 @@ class Tensor {
     CVD_CHECK(dtype() == dtype_of<T>::value, "tensor {} accessed as the wrong dtype", str());
     return static_cast<T*>(data_ptr());
   }
-  double item() const;  // the one element, as double (any device)
+  double item() const;                    // the one element, as double (any device)
   std::vector<double> to_vector() const;  // all elements, row-major, as double (any device)
   std::vector<float> to_float_vector() const;
 

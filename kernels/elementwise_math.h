@@ -17,20 +17,34 @@ template <class T>
 CVD_HOST_DEVICE T unary_forward(UnaryOp op, T x, T a, T b) {
   using std::exp, std::log, std::pow, std::sqrt, std::tanh;  // float overloads for float
   switch (op) {
-    case UnaryOp::relu: return x > T(0) ? x : T(0);
-    case UnaryOp::clip: return x < a ? a : (x > b ? b : x);
-    case UnaryOp::leaky_relu: return x > T(0) ? x : a * x;
-    case UnaryOp::sigmoid: return T(1) / (T(1) + exp(-x));
-    case UnaryOp::tanh: return tanh(x);
-    case UnaryOp::exp: return exp(x);
-    case UnaryOp::log: return log(x);
-    case UnaryOp::abs: return x < T(0) ? -x : x;
-    case UnaryOp::sqrt: return sqrt(x);
-    case UnaryOp::neg: return -x;
-    case UnaryOp::reciprocal: return T(1) / x;
-    case UnaryOp::pow_scalar: return pow(x, a);
-    case UnaryOp::mul_scalar: return x * a;
-    case UnaryOp::add_scalar: return x + a;
+    case UnaryOp::relu:
+      return x > T(0) ? x : T(0);
+    case UnaryOp::clip:
+      return x < a ? a : (x > b ? b : x);
+    case UnaryOp::leaky_relu:
+      return x > T(0) ? x : a * x;
+    case UnaryOp::sigmoid:
+      return T(1) / (T(1) + exp(-x));
+    case UnaryOp::tanh:
+      return tanh(x);
+    case UnaryOp::exp:
+      return exp(x);
+    case UnaryOp::log:
+      return log(x);
+    case UnaryOp::abs:
+      return x < T(0) ? -x : x;
+    case UnaryOp::sqrt:
+      return sqrt(x);
+    case UnaryOp::neg:
+      return -x;
+    case UnaryOp::reciprocal:
+      return T(1) / x;
+    case UnaryOp::pow_scalar:
+      return pow(x, a);
+    case UnaryOp::mul_scalar:
+      return x * a;
+    case UnaryOp::add_scalar:
+      return x + a;
   }
   return x;
 }
@@ -40,20 +54,34 @@ template <class T>
 CVD_HOST_DEVICE T unary_backward(UnaryOp op, T gy, T x, T y, T a, T b) {
   using std::pow;
   switch (op) {
-    case UnaryOp::relu: return x > T(0) ? gy : T(0);
-    case UnaryOp::clip: return (x > a && x < b) ? gy : T(0);
-    case UnaryOp::leaky_relu: return x > T(0) ? gy : a * gy;
-    case UnaryOp::sigmoid: return gy * y * (T(1) - y);
-    case UnaryOp::tanh: return gy * (T(1) - y * y);
-    case UnaryOp::exp: return gy * y;
-    case UnaryOp::log: return gy / x;
-    case UnaryOp::abs: return x > T(0) ? gy : (x < T(0) ? -gy : T(0));
-    case UnaryOp::sqrt: return gy * T(0.5) / y;
-    case UnaryOp::neg: return -gy;
-    case UnaryOp::reciprocal: return -gy * y * y;
-    case UnaryOp::pow_scalar: return gy * a * pow(x, a - T(1));
-    case UnaryOp::mul_scalar: return gy * a;
-    case UnaryOp::add_scalar: return gy;
+    case UnaryOp::relu:
+      return x > T(0) ? gy : T(0);
+    case UnaryOp::clip:
+      return (x > a && x < b) ? gy : T(0);
+    case UnaryOp::leaky_relu:
+      return x > T(0) ? gy : a * gy;
+    case UnaryOp::sigmoid:
+      return gy * y * (T(1) - y);
+    case UnaryOp::tanh:
+      return gy * (T(1) - y * y);
+    case UnaryOp::exp:
+      return gy * y;
+    case UnaryOp::log:
+      return gy / x;
+    case UnaryOp::abs:
+      return x > T(0) ? gy : (x < T(0) ? -gy : T(0));
+    case UnaryOp::sqrt:
+      return gy * T(0.5) / y;
+    case UnaryOp::neg:
+      return -gy;
+    case UnaryOp::reciprocal:
+      return -gy * y * y;
+    case UnaryOp::pow_scalar:
+      return gy * a * pow(x, a - T(1));
+    case UnaryOp::mul_scalar:
+      return gy * a;
+    case UnaryOp::add_scalar:
+      return gy;
   }
   return gy;
 }
@@ -61,17 +89,28 @@ CVD_HOST_DEVICE T unary_backward(UnaryOp op, T gy, T x, T y, T a, T b) {
 template <class T>
 CVD_HOST_DEVICE T binary_forward(BinaryOp op, T x, T y) {
   switch (op) {
-    case BinaryOp::add: return x + y;
-    case BinaryOp::sub: return x - y;
-    case BinaryOp::mul: return x * y;
-    case BinaryOp::div: return x / y;
-    case BinaryOp::minimum: return y < x ? y : x;
-    case BinaryOp::maximum: return y > x ? y : x;
-    case BinaryOp::gt: return x > y ? T(1) : T(0);
-    case BinaryOp::ge: return x >= y ? T(1) : T(0);
-    case BinaryOp::lt: return x < y ? T(1) : T(0);
-    case BinaryOp::le: return x <= y ? T(1) : T(0);
-    case BinaryOp::eq: return x == y ? T(1) : T(0);
+    case BinaryOp::add:
+      return x + y;
+    case BinaryOp::sub:
+      return x - y;
+    case BinaryOp::mul:
+      return x * y;
+    case BinaryOp::div:
+      return x / y;
+    case BinaryOp::minimum:
+      return y < x ? y : x;
+    case BinaryOp::maximum:
+      return y > x ? y : x;
+    case BinaryOp::gt:
+      return x > y ? T(1) : T(0);
+    case BinaryOp::ge:
+      return x >= y ? T(1) : T(0);
+    case BinaryOp::lt:
+      return x < y ? T(1) : T(0);
+    case BinaryOp::le:
+      return x <= y ? T(1) : T(0);
+    case BinaryOp::eq:
+      return x == y ? T(1) : T(0);
   }
   return x;
 }

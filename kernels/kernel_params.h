@@ -19,7 +19,7 @@ enum class UnaryOp : int {
   tanh,
   exp,
   log,
-  abs,         // gradient sign(x), 0 at 0
+  abs,  // gradient sign(x), 0 at 0
   sqrt,
   neg,
   reciprocal,
@@ -34,9 +34,18 @@ struct UnaryParams {
 };
 
 enum class BinaryOp : int {
-  add, sub, mul, div, minimum, maximum,
+  add,
+  sub,
+  mul,
+  div,
+  minimum,
+  maximum,
   // comparisons produce 1 or 0 and are not differentiable
-  gt, ge, lt, le, eq,
+  gt,
+  ge,
+  lt,
+  le,
+  eq,
 };
 struct BinaryParams {
   BinaryOp op = BinaryOp::add;

@@ -28,8 +28,9 @@ struct IncConfig {
 class Scale {
  public:
   explicit Scale(double w) : w_(w) {
-    CVD_CHECK(w > 0 && std::abs(w * 16 - std::round(w * 16)) < 1e-9,
-              "mannequin: width {} must make 16 * width a whole number (1, 0.5, 0.25, 0.125, 0.0625)", w);
+    CVD_CHECK(
+        w > 0 && std::abs(w * 16 - std::round(w * 16)) < 1e-9,
+        "mannequin: width {} must make 16 * width a whole number (1, 0.5, 0.25, 0.125, 0.0625)", w);
   }
   int64_t operator()(int64_t c) const { return static_cast<int64_t>(std::llround(c * w_)); }
   IncConfig operator()(const IncConfig& c) const {
@@ -88,8 +89,7 @@ class Inception : public Module {
 // Sum of two branches held in a ModuleList named "list".
 class TwoBranch : public Module {
  public:
-  TwoBranch(std::shared_ptr<Sequential> first, std::shared_ptr<Sequential> second,
-            const char* name)
+  TwoBranch(std::shared_ptr<Sequential> first, std::shared_ptr<Sequential> second, const char* name)
       : name_(name) {
     list_ = register_module("list", std::make_shared<Sequential>());
     list_->push_back(std::move(first));
@@ -123,13 +123,15 @@ class Builder {
     return std::make_shared<Inception>(s_(in), s_(c), gen_);
   }
   std::shared_ptr<Module> channels1() {
-    auto a = std::make_shared<Sequential>(std::initializer_list<std::shared_ptr<Module>>{inc(256, A1), inc(256, A1)});
+    auto a = std::make_shared<Sequential>(
+        std::initializer_list<std::shared_ptr<Module>>{inc(256, A1), inc(256, A1)});
     auto b = std::make_shared<Sequential>(std::initializer_list<std::shared_ptr<Module>>{
         std::make_shared<AvgPool2d>(avg2()), inc(256, A1), inc(256, A1), inc(256, A1), up2()});
     return std::make_shared<TwoBranch>(a, b, "Channels1");
   }
   std::shared_ptr<Module> channels2() {
-    auto a = std::make_shared<Sequential>(std::initializer_list<std::shared_ptr<Module>>{inc(256, A1), inc(256, A2)});
+    auto a = std::make_shared<Sequential>(
+        std::initializer_list<std::shared_ptr<Module>>{inc(256, A1), inc(256, A2)});
     auto b = std::make_shared<Sequential>(std::initializer_list<std::shared_ptr<Module>>{
         std::make_shared<AvgPool2d>(avg2()), inc(256, A1), inc(256, A1), channels1(), inc(256, A1),
         inc(256, A2), up2()});
@@ -139,14 +141,16 @@ class Builder {
     auto a = std::make_shared<Sequential>(std::initializer_list<std::shared_ptr<Module>>{
         std::make_shared<AvgPool2d>(avg2()), inc(128, B1), inc(128, A1), channels2(), inc(256, A1),
         inc(256, B1), up2()});
-    auto b = std::make_shared<Sequential>(std::initializer_list<std::shared_ptr<Module>>{inc(128, B1), inc(128, BC)});
+    auto b = std::make_shared<Sequential>(
+        std::initializer_list<std::shared_ptr<Module>>{inc(128, B1), inc(128, BC)});
     return std::make_shared<TwoBranch>(a, b, "Channels3");
   }
   std::shared_ptr<Module> channels4() {
     auto a = std::make_shared<Sequential>(std::initializer_list<std::shared_ptr<Module>>{
         std::make_shared<AvgPool2d>(avg2()), inc(128, B1), inc(128, B1), channels3(), inc(128, BB3),
         inc(128, BA), up2()});
-    auto b = std::make_shared<Sequential>(std::initializer_list<std::shared_ptr<Module>>{inc(128, A)});
+    auto b =
+        std::make_shared<Sequential>(std::initializer_list<std::shared_ptr<Module>>{inc(128, A)});
     return std::make_shared<TwoBranch>(a, b, "Channels4");
   }
   const Scale& scale() const { return s_; }
@@ -170,7 +174,8 @@ MannequinNet::MannequinNet(double width, Generator& gen) {
   uncertainty_ = register_module("uncertainty_layer", std::make_shared<Sequential>());
   uncertainty_->push_back(std::make_shared<Conv2d>(Conv2dOptions(c64, 1, 3).with_padding(1), gen));
   uncertainty_->push_back(std::make_shared<Sigmoid>());
-  pred_ = register_module("pred_layer", std::make_shared<Conv2d>(Conv2dOptions(c64, 1, 3).with_padding(1), gen));
+  pred_ = register_module("pred_layer",
+                          std::make_shared<Conv2d>(Conv2dOptions(c64, 1, 3).with_padding(1), gen));
 }
 
 Tensor MannequinNet::forward_raw(const Tensor& x) {

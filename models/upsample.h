@@ -14,9 +14,12 @@ class Upsample : public Module {
   Tensor forward(const Tensor& x) override {
     int64_t h = x.size(2) * scale_, w = x.size(3) * scale_;
     switch (mode_) {
-      case UpsampleMode::bilinear_align_corners: return upsample_bilinear2d(x, h, w, true);
-      case UpsampleMode::bilinear: return upsample_bilinear2d(x, h, w, false);
-      case UpsampleMode::nearest: return upsample_nearest2d(x, h, w);
+      case UpsampleMode::bilinear_align_corners:
+        return upsample_bilinear2d(x, h, w, true);
+      case UpsampleMode::bilinear:
+        return upsample_bilinear2d(x, h, w, false);
+      case UpsampleMode::nearest:
+        return upsample_nearest2d(x, h, w);
     }
     return x;
   }

@@ -3,8 +3,8 @@
 // 7-Scenes), x_world = R * x_cam + t. Camera axes: x right, y down, z forward (OpenCV/COLMAP).
 #pragma once
 #include <Eigen/Core>
-#include <cmath>
 #include <Eigen/Geometry>
+#include <cmath>
 #include <string>
 #include <vector>
 

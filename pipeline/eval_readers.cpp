@@ -118,8 +118,8 @@ EvalSequence read_cvd_run(const fs::path& dir, const std::string& depth_subdir) 
   seq.layout = "cvd-run";
   auto depths = list_files(dir / depth_subdir, {".pfm"});
   if (depths.empty())
-    fail(ErrorCategory::format, "{}: no {}/*.pfm files (not a cvd run directory?)",
-         dir.string(), depth_subdir);
+    fail(ErrorCategory::format, "{}: no {}/*.pfm files (not a cvd run directory?)", dir.string(),
+         depth_subdir);
   std::map<std::string, fs::path> by_name;
   for (auto& p : depths) by_name[p.stem().string()] = p;
   std::vector<std::pair<std::string, std::optional<double>>> order;

@@ -90,9 +90,12 @@ static void evaluate_depth(const EvalSequence& pred, const EvalSequence& gt,
     for (auto& m : matches) names.push_back(pred.frames[m.pred].name);
     SparseDepthEval se = evaluate_sparse_depth(read_sparse_depth_csv(sparse_csv), names, gs,
                                                opt.depth.min_depth, opt.depth.max_depth);
-    out.metrics["sparse"] = {{"frames", se.frames},   {"points", se.points},
-                             {"density", se.density}, {"abs_rel", se.abs_rel},
-                             {"abs_rel_video", se.abs_rel_video}, {"delta1", se.delta1}};
+    out.metrics["sparse"] = {{"frames", se.frames},
+                             {"points", se.points},
+                             {"density", se.density},
+                             {"abs_rel", se.abs_rel},
+                             {"abs_rel_video", se.abs_rel_video},
+                             {"delta1", se.delta1}};
   }
   // Thumbnails: the prediction scaled by the one video scale, so it shares the GT's colours.
   double video_scale = depth["median_video"]["depth"]["scales"].empty()

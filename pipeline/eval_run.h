@@ -30,8 +30,8 @@ namespace cvd {
 struct EvalRunOptions {
   std::filesystem::path pred_dir;
   std::string depth_subdir = "depth";  // "depth_initial": the network before test-time training
-  std::filesystem::path gt_dir;      // empty: no ground truth (consistency metrics only)
-  std::filesystem::path frames_dir;  // RGB frames by stem; empty: from the run or the GT
+  std::filesystem::path gt_dir;        // empty: no ground truth (consistency metrics only)
+  std::filesystem::path frames_dir;    // RGB frames by stem; empty: from the run or the GT
   GtFormat gt_format = GtFormat::auto_detect;
   double png_depth_scale = 1e-3;
   DepthEvalOptions depth;

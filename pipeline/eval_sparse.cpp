@@ -105,8 +105,7 @@ SparseDepthEval evaluate_sparse_depth(const std::map<std::string, SparseDepthFra
     if (it == sparse.end() || it->second.points.empty()) continue;
     const SparseDepthFrame& f = it->second;
     const cv::Mat& g = gt_depths[i];
-    CVD_CHECK(g.type() == CV_32FC1, "evaluate_sparse_depth: GT of '{}' must be CV_32FC1",
-              names[i]);
+    CVD_CHECK(g.type() == CV_32FC1, "evaluate_sparse_depth: GT of '{}' must be CV_32FC1", names[i]);
     const double sx = double(g.cols) / f.width, sy = double(g.rows) / f.height;
     FramePairs fp;
     fp.pixels = double(f.width) * f.height;

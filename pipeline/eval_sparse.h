@@ -34,12 +34,12 @@ void write_sparse_depth_csv(const std::filesystem::path& path,
                             const std::map<std::string, SparseDepthFrame>& frames);
 
 struct SparseDepthEval {
-  int frames = 0;           // frames with >= 1 point on valid GT
-  int64_t points = 0;       // points on valid GT, all frames
-  double density = 0;       // mean over frames of points / pixels of the depth map
-  double abs_rel = 0;       // mean over frames of mean |s z - d| / d, s = median(d / z) per frame
-  double abs_rel_video = 0; // the same with ONE s (median over all points) for the whole video
-  double delta1 = 0;        // fraction of points with max(s z / d, d / s z) < 1.25 (per-frame s)
+  int frames = 0;            // frames with >= 1 point on valid GT
+  int64_t points = 0;        // points on valid GT, all frames
+  double density = 0;        // mean over frames of points / pixels of the depth map
+  double abs_rel = 0;        // mean over frames of mean |s z - d| / d, s = median(d / z) per frame
+  double abs_rel_video = 0;  // the same with ONE s (median over all points) for the whole video
+  double delta1 = 0;         // fraction of points with max(s z / d, d / s z) < 1.25 (per-frame s)
 };
 
 // `gt_depths[i]` (metres, <= 0 or non-finite invalid) is the GT of frame `names[i]`; points are

@@ -21,8 +21,10 @@ int triangulate_flow_points(const FrameCamera& ci, const FrameCamera& cj, int i,
       if (!mask.at<uint8_t>(y, x)) continue;
       cv::Vec2f f = flow.at<cv::Vec2f>(y, x);
       double xj = x + f[0], yj = y + f[1];
-      Eigen::Vector3d ri = ci.pose.R * Eigen::Vector3d((x - Ki.cx) / Ki.fx, (y - Ki.cy) / Ki.fy, 1.0);
-      Eigen::Vector3d rj = cj.pose.R * Eigen::Vector3d((xj - Kj.cx) / Kj.fx, (yj - Kj.cy) / Kj.fy, 1.0);
+      Eigen::Vector3d ri =
+          ci.pose.R * Eigen::Vector3d((x - Ki.cx) / Ki.fx, (y - Ki.cy) / Ki.fy, 1.0);
+      Eigen::Vector3d rj =
+          cj.pose.R * Eigen::Vector3d((xj - Kj.cx) / Kj.fx, (yj - Kj.cy) / Kj.fy, 1.0);
       Eigen::Vector3d di = ri.normalized(), dj = rj.normalized();
       if (di.dot(dj) > cos_min) continue;  // too little parallax
       // Closest points of the rays oi + a di and oj + b dj.

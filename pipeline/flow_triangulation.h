@@ -12,8 +12,8 @@
 namespace cvd {
 
 struct FlowTriangulationOptions {
-  int grid_step = 6;                // sample every n-th pixel in x and y
-  double min_parallax_deg = 1.0;    // angle between the two rays
+  int grid_step = 6;              // sample every n-th pixel in x and y
+  double min_parallax_deg = 1.0;  // angle between the two rays
   double max_reprojection_px = 1.0;
 };
 

@@ -2,9 +2,9 @@
 
 #include <spdlog/spdlog.h>
 
+#include <fmt/format.h>
 #include <algorithm>
 #include <cmath>
-#include <fmt/format.h>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
 
@@ -34,9 +34,10 @@ void check_size(FrameSourceInfo& info, const cv::Mat& img, const std::string& wh
     info.width = img.cols;
     info.height = img.rows;
   } else if (img.cols != info.width || img.rows != info.height) {
-    fail(ErrorCategory::invalid_argument,
-         "{}: frame size {}x{} differs from the first frame's {}x{} (all frames must have one size)",
-         what, img.cols, img.rows, info.width, info.height);
+    fail(
+        ErrorCategory::invalid_argument,
+        "{}: frame size {}x{} differs from the first frame's {}x{} (all frames must have one size)",
+        what, img.cols, img.rows, info.width, info.height);
   }
 }
 
@@ -51,8 +52,9 @@ cv::Size aligned_size(int width, int height, int long_side, int alignment) {
   return {round_to(width * s), round_to(height * s)};
 }
 
-FrameSourceInfo read_frames(const fs::path& input, const FrameSourceOptions& o,
-                            const std::function<void(int, const std::string&, const cv::Mat&)>& sink) {
+FrameSourceInfo read_frames(
+    const fs::path& input, const FrameSourceOptions& o,
+    const std::function<void(int, const std::string&, const cv::Mat&)>& sink) {
   FrameSourceInfo info;
   std::error_code ec;
   if (!fs::exists(input, ec))
@@ -71,7 +73,8 @@ FrameSourceInfo read_frames(const fs::path& input, const FrameSourceOptions& o,
     if (!info.skipped_files.empty())
       spdlog::warn("{}: ignoring {} non-image file(s), e.g. '{}'", input.string(),
                    info.skipped_files.size(), info.skipped_files[0]);
-    if (files.empty()) fail(ErrorCategory::invalid_argument, "{}: the folder holds no images", input.string());
+    if (files.empty())
+      fail(ErrorCategory::invalid_argument, "{}: the folder holds no images", input.string());
     for (int i = 0; i < static_cast<int>(files.size()); ++i) {
       if (!selected(i, o, kept)) continue;
       cv::Mat img = cv::imread(files[i].string(), cv::IMREAD_COLOR);  // applies EXIF orientation
@@ -105,8 +108,8 @@ FrameSourceInfo read_frames(const fs::path& input, const FrameSourceOptions& o,
       fail(ErrorCategory::format, "{}: the video has no decodable frames", input.string());
   }
   if (kept < 2)
-    fail(ErrorCategory::invalid_argument, "{}: {} frame(s) selected; consistent video depth needs at least 2",
-         input.string(), kept);
+    fail(ErrorCategory::invalid_argument,
+         "{}: {} frame(s) selected; consistent video depth needs at least 2", input.string(), kept);
   return info;
 }
 

@@ -28,8 +28,9 @@ struct FrameSourceInfo {
 // Decodes every selected frame and hands it to `sink(index, name, bgr)` one at a time (frames
 // are streamed, never all held). Errors name the file and cause: missing path, unreadable or
 // zero-frame video, undecodable image, frames of different sizes, fewer than 2 frames.
-FrameSourceInfo read_frames(const std::filesystem::path& input, const FrameSourceOptions& options,
-                            const std::function<void(int, const std::string&, const cv::Mat&)>& sink);
+FrameSourceInfo read_frames(
+    const std::filesystem::path& input, const FrameSourceOptions& options,
+    const std::function<void(int, const std::string&, const cv::Mat&)>& sink);
 
 // Processing size for a network: long side `long_side`, aspect kept, each side rounded to a
 // multiple of `alignment` (at least one multiple).

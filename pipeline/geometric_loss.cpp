@@ -88,9 +88,9 @@ GeometricLoss geometric_loss_direction(const Tensor& depth_i, const Tensor& dept
   Tensor gx = add_scalar(mul_scalar(tu, W > 1 ? 2.0 / (W - 1) : 0.0), -1.0);
   Tensor gy = add_scalar(mul_scalar(tv, H > 1 ? 2.0 / (H - 1) : 0.0), -1.0);
   Tensor grid = concat({gx.reshape({1, H, W, 1}), gy.reshape({1, H, W, 1})}, 3);
-  Tensor dj = grid_sample(depth_j.reshape({1, 1, H, W}), grid,
-                          GridSampleParams{GridPadding::border, true})
-                  .reshape({H * W});
+  Tensor dj =
+      grid_sample(depth_j.reshape({1, 1, H, W}), grid, GridSampleParams{GridPadding::border, true})
+          .reshape({H * W});
   Tensor zj = maximum(dj, Tensor::full({}, o.min_depth, dt));
   double focal = 0.5 * (d.K_i.fx + d.K_i.fy);
   Tensor disp = mul_scalar(abs(sub(reciprocal(z), reciprocal(zj))), focal);
@@ -108,8 +108,8 @@ GeometricLoss geometric_loss_pair(const Tensor& depth_i, const Tensor& depth_j,
                                   const GeometricLossOptions& o) {
   GeometricLoss a = geometric_loss_direction(depth_i, depth_j, ij, o);
   GeometricLoss b = geometric_loss_direction(depth_j, depth_i, ji, o);
-  return {mul_scalar(add(a.spatial, b.spatial), 0.5), mul_scalar(add(a.disparity, b.disparity), 0.5),
-          mul_scalar(add(a.total, b.total), 0.5)};
+  return {mul_scalar(add(a.spatial, b.spatial), 0.5),
+          mul_scalar(add(a.disparity, b.disparity), 0.5), mul_scalar(add(a.total, b.total), 0.5)};
 }
 
 Tensor reprojection_distance(const Tensor& depth_i, const PairDirection& d) {
@@ -122,7 +122,8 @@ Tensor reprojection_distance(const Tensor& depth_i, const PairDirection& d) {
   std::vector<double> fl = d.flow.to_vector(), out(H * W);
   for (int64_t k = 0; k < H * W; ++k) {
     double pu = d.K_j.fx * u[k] / zz[k] + d.K_j.cx, pv = d.K_j.fy * v[k] / zz[k] + d.K_j.cy;
-    double tu = static_cast<double>(k % W) + fl[2 * k], tv = static_cast<double>(k / W) + fl[2 * k + 1];
+    double tu = static_cast<double>(k % W) + fl[2 * k],
+           tv = static_cast<double>(k / W) + fl[2 * k + 1];
     out[k] = std::hypot(pu - tu, pv - tv);
   }
   return Tensor::from_vector(out, {H, W}, dt);

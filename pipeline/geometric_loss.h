@@ -18,10 +18,10 @@ namespace cvd {
 
 // Constants of one ordered pair i -> j at the depth resolution.
 struct PairDirection {
-  Pose pose_i, pose_j;       // camera-to-world, translations in network depth units
-  Intrinsics K_i, K_j;       // at the depth map resolution
-  Tensor flow;               // [H, W, 2] f32/f64: displacement in pixels from frame i to j
-  Tensor mask;               // [H, W] 1 where the flow is trusted, else 0
+  Pose pose_i, pose_j;  // camera-to-world, translations in network depth units
+  Intrinsics K_i, K_j;  // at the depth map resolution
+  Tensor flow;          // [H, W, 2] f32/f64: displacement in pixels from frame i to j
+  Tensor mask;          // [H, W] 1 where the flow is trusted, else 0
 };
 
 struct GeometricLossOptions {

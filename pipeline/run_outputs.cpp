@@ -2,8 +2,8 @@
 
 #include <spdlog/spdlog.h>
 
-#include <algorithm>
 #include <fmt/format.h>
+#include <algorithm>
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -22,7 +22,8 @@ namespace {
 
 void write_png(const fs::path& p, const cv::Mat& m) {
   write_atomically(p, [&](const fs::path& tmp) {
-    if (!cv::imwrite(tmp.string(), m)) fail(ErrorCategory::io, "{}: cannot write the image", p.string());
+    if (!cv::imwrite(tmp.string(), m))
+      fail(ErrorCategory::io, "{}: cannot write the image", p.string());
   });
 }
 
@@ -108,8 +109,10 @@ void write_point_cloud(const fs::path& file, const RunOutputs& r, int pixel_step
         if (!(z > 0) || !std::isfinite(z)) continue;
         Eigen::Vector3d pc((x - K.cx) / K.fx * z, (y - K.cy) / K.fy * z, z);
         Eigen::Vector3d pw = c.pose.transform(pc);
-        cv::Vec3b col = r.frames_bgr.empty() ? cv::Vec3b(200, 200, 200) : r.frames_bgr[k].at<cv::Vec3b>(y, x);
-        body += fmt::format("{:.5f} {:.5f} {:.5f} {} {} {}\n", pw.x(), pw.y(), pw.z(), col[2], col[1], col[0]);
+        cv::Vec3b col =
+            r.frames_bgr.empty() ? cv::Vec3b(200, 200, 200) : r.frames_bgr[k].at<cv::Vec3b>(y, x);
+        body += fmt::format("{:.5f} {:.5f} {:.5f} {} {} {}\n", pw.x(), pw.y(), pw.z(), col[2],
+                            col[1], col[0]);
         ++n;
       }
   }
@@ -129,7 +132,8 @@ void write_videos(const fs::path& out, const RunOutputs& r) {
     write_atomically(target, [&](const fs::path& tmp) {
       cv::Size vs = side_by_side ? cv::Size(2 * s.width, s.height) : s;
       cv::VideoWriter w(tmp.string(), cv::VideoWriter::fourcc('m', 'p', '4', 'v'), r.fps, vs);
-      if (!w.isOpened()) fail(ErrorCategory::io, "{}: cannot open a video writer (mp4v)", target.string());
+      if (!w.isOpened())
+        fail(ErrorCategory::io, "{}: cannot open a video writer (mp4v)", target.string());
       for (size_t k = 0; k < r.depths.size(); ++k) {
         cv::Mat c = colorize_depth(r.depths[k], range);
         if (side_by_side) {

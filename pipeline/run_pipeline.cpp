@@ -27,15 +27,15 @@ namespace cvd {
 namespace fs = std::filesystem;
 using json = nlohmann::json;
 
-double default_learning_rate(const std::string& arch) {
-  return arch == "mannequin" ? 4e-4 : 1e-4;
-}
+double default_learning_rate(const std::string& arch) { return arch == "mannequin" ? 4e-4 : 1e-4; }
 double default_lambda(const std::string& arch) { return arch == "mannequin" ? 0.1 : 1e-4; }
 
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+double since(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
 
 std::unique_ptr<DepthNet> load_network(const RunOptions& o, std::string& description) {
   std::string arch = o.arch;
@@ -58,7 +58,8 @@ std::unique_ptr<DepthNet> load_network(const RunOptions& o, std::string& descrip
     load_weights(*net, o.model, true);
     description = fmt::format("{} from {}", arch, o.model.string());
   } else {
-    description = fmt::format("{} (width x{}) with no pretrained weights (default network)", arch, width);
+    description =
+        fmt::format("{} (width x{}) with no pretrained weights (default network)", arch, width);
   }
   return net;
 }
@@ -146,13 +147,14 @@ void initialise_default_network(DepthNet& net, const std::function<Tensor(int)>&
     if (!std::isfinite(last)) continue;
     loss.backward();
     adam.step();
-    if (o.progress) o.progress({"warm-up", step + 1, o.warmup_steps, fmt::format("log-depth L1 {:.4f}", last)});
+    if (o.progress)
+      o.progress({"warm-up", step + 1, o.warmup_steps, fmt::format("log-depth L1 {:.4f}", last)});
   }
   info["warmup_final_loss"] = last;
 }
 
-std::vector<cv::Mat> infer_depths(DepthNet& net, const std::function<Tensor(int)>& load_frame, int n,
-                                  const RunOptions& o, const std::string& stage) {
+std::vector<cv::Mat> infer_depths(DepthNet& net, const std::function<Tensor(int)>& load_frame,
+                                  int n, const RunOptions& o, const std::string& stage) {
   NoGradGuard ng;
   net.eval();
   std::vector<cv::Mat> r;
@@ -194,7 +196,8 @@ RunResult run_pipeline(const RunOptions& o) {
     fail(ErrorCategory::io, "{}: cannot create the output directory ({})", o.out.string(),
          ec ? ec.message() : "a file of that name exists");
   fs::path cache = o.out / "cache";
-  json info = {{"version", CVD_VERSION}, {"input", o.input.string()}, {"backends", compiled_backends()}};
+  json info = {
+      {"version", CVD_VERSION}, {"input", o.input.string()}, {"backends", compiled_backends()}};
   json timings;
 
   // 1. Frames
@@ -209,7 +212,9 @@ RunResult run_pipeline(const RunOptions& o) {
   cv::Size dsize = aligned_size(frames.width, frames.height, o.depth_long_side, net->alignment());
   spdlog::info("{} frames of {}x{}; depth network {} at {}x{}", n, frames.input_width,
                frames.input_height, net_desc, dsize.width, dsize.height);
-  std::function<Tensor(int)> load_frame = [&](int k) { return frame_tensor(frames.load(k), dsize); };
+  std::function<Tensor(int)> load_frame = [&](int k) {
+    return frame_tensor(frames.load(k), dsize);
+  };
 
   // 3. Poses
   t = Clock::now();
@@ -240,8 +245,9 @@ RunResult run_pipeline(const RunOptions& o) {
   json calib;
   if (o.model.empty()) {
     initialise_default_network(*net, load_frame, sparse, o, calib);
-    calib["method"] = "default network: output level set to the median sparse depth, then warm-up "
-                      "on sparse depths; poses keep their units";
+    calib["method"] =
+        "default network: output level set to the median sparse depth, then warm-up "
+        "on sparse depths; poses keep their units";
   }
   std::vector<cv::Mat> initial = infer_depths(*net, load_frame, n, o, "initial depth");
   if (!o.model.empty()) {
@@ -249,7 +255,9 @@ RunResult run_pipeline(const RunOptions& o) {
     CVD_CHECK(sc.num_valid() > 0, "scale calibration: no frame has enough sparse points");
     cams = sc.cameras;
     calib = {{"method", "per-frame median ratio network/SfM depth, mean over frames"},
-             {"scale", sc.scale}, {"frame_scales", sc.frame_scales}, {"valid_frames", sc.num_valid()}};
+             {"scale", sc.scale},
+             {"frame_scales", sc.frame_scales},
+             {"valid_frames", sc.num_valid()}};
   }
   timings["initial_depth"] = since(t);
 
@@ -270,9 +278,12 @@ RunResult run_pipeline(const RunOptions& o) {
   to.stop_after_epochs = o.stop_after_epochs;
   if (o.cancel) to.cancelled = [c = o.cancel] { return c->load(); };
   to.on_step = [&](int e, int s, int steps, double l) {
-    if (o.progress) o.progress({"training", s, steps, fmt::format("epoch {}/{} loss {:.4f}", e, o.epochs, l)});
+    if (o.progress)
+      o.progress({"training", s, steps, fmt::format("epoch {}/{} loss {:.4f}", e, o.epochs, l)});
   };
-  to.on_epoch = [&](int e, double l) { spdlog::info("training: epoch {}/{} mean loss {:.4f}", e, o.epochs, l); };
+  to.on_epoch = [&](int e, double l) {
+    spdlog::info("training: epoch {}/{} mean loss {:.4f}", e, o.epochs, l);
+  };
   t = Clock::now();
   RunResult res;
   res.initial_loss = evaluate_geometric_loss(*net, load_frame, pairs, to.lambda_disparity);
@@ -312,7 +323,8 @@ RunResult run_pipeline(const RunOptions& o) {
     write_sparse_depth_csv(o.out / "sparse_depth.csv", sd);
   }
   fs::create_directories(o.out / "depth_initial");
-  for (int k = 0; k < n; ++k) write_pfm(o.out / "depth_initial" / (frames.names[k] + ".pfm"), initial[k]);
+  for (int k = 0; k < n; ++k)
+    write_pfm(o.out / "depth_initial" / (frames.names[k] + ".pfm"), initial[k]);
   timings["outputs"] = since(t);
   timings["total"] = since(t_all);
 
@@ -327,14 +339,20 @@ RunResult run_pipeline(const RunOptions& o) {
   res.epoch_losses = tr.epoch_losses;
   info["network"] = net_desc;
   info["depth_size"] = {dsize.width, dsize.height};
-  info["frame_stats"] = {{"count", n}, {"registered", registered}, {"input_size", {frames.input_width, frames.input_height}}};
+  info["frame_stats"] = {{"count", n},
+                         {"registered", registered},
+                         {"input_size", {frames.input_width, frames.input_height}}};
   // The frames of poses.txt, in its order (registered frames only), for `cvd eval`.
   json frame_list = json::array();
   for (int k = 0; k < n; ++k)
-    if (cams[k].registered) frame_list.push_back({{"name", frames.names[k]}, {"timestamp", k / frames.fps}});
+    if (cams[k].registered)
+      frame_list.push_back({{"name", frames.names[k]}, {"timestamp", k / frames.fps}});
   info["frames"] = frame_list;
-  info["poses"] = {{"source", poses.source}, {"intrinsics_source", poses.intrinsics_source},
-                   {"intrinsics_depth_res", {cams[0].intrinsics.fx, cams[0].intrinsics.fy, cams[0].intrinsics.cx, cams[0].intrinsics.cy}},
+  info["poses"] = {{"source", poses.source},
+                   {"intrinsics_source", poses.intrinsics_source},
+                   {"intrinsics_depth_res",
+                    {cams[0].intrinsics.fx, cams[0].intrinsics.fy, cams[0].intrinsics.cx,
+                     cams[0].intrinsics.cy}},
                    {"details", poses.info}};
   info["calibration"] = calib;
   {
@@ -345,11 +363,16 @@ RunResult run_pipeline(const RunOptions& o) {
                              {"file", "sparse_depth.csv"}};
   }
   info["pairs"] = {{"kept", res.num_pairs}, {"dropped", flow.dropped}};
-  info["training"] = {{"epochs", o.epochs}, {"batch_pairs", to.batch_pairs}, {"lr", to.lr},
-                      {"lambda", to.lambda_disparity}, {"seed", o.seed},
-                      {"epoch_losses", tr.epoch_losses}, {"skipped_steps", tr.skipped_steps},
+  info["training"] = {{"epochs", o.epochs},
+                      {"batch_pairs", to.batch_pairs},
+                      {"lr", to.lr},
+                      {"lambda", to.lambda_disparity},
+                      {"seed", o.seed},
+                      {"epoch_losses", tr.epoch_losses},
+                      {"skipped_steps", tr.skipped_steps},
                       {"resumed_from_epoch", tr.resumed_from_epoch},
-                      {"geometric_loss_before", res.initial_loss}, {"geometric_loss_after", res.final_loss}};
+                      {"geometric_loss_before", res.initial_loss},
+                      {"geometric_loss_after", res.final_loss}};
   info["timings_s"] = timings;
   res.run_info = info;
   write_text_file(o.out / "run.json", info.dump(2));

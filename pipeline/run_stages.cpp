@@ -7,20 +7,20 @@
 #include <chrono>
 #include <cstring>
 #include <fstream>
-#include <set>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <set>
 
 #include "engine/error.h"
 #include "pipeline/atomic_file.h"
 #include "pipeline/colmap_runner.h"
 #include "pipeline/exif_focal.h"
-#include "pipeline/intrinsics_focal_search.h"
 #include "pipeline/flow_dis.h"
 #include "pipeline/flow_flownet2.h"
 #include "pipeline/flow_io.h"
 #include "pipeline/flow_pair.h"
 #include "pipeline/frame_source.h"
+#include "pipeline/intrinsics_focal_search.h"
 #include "pipeline/trajectory_io.h"
 
 namespace cvd {
@@ -63,8 +63,11 @@ cv::Mat FramesStage::load(int k) const {
 FramesStage run_frames_stage(const RunOptions& o, const fs::path& cache) {
   FramesStage st;
   st.dir = cache / "frames";
-  json key = {{"input", fs::absolute(o.input).string()}, {"max_frames", o.max_frames},
-              {"step", o.frame_step}, {"first", o.first_frame}, {"flow_long_side", o.flow_long_side}};
+  json key = {{"input", fs::absolute(o.input).string()},
+              {"max_frames", o.max_frames},
+              {"step", o.frame_step},
+              {"first", o.first_frame},
+              {"flow_long_side", o.flow_long_side}};
   json done = read_json_if(st.dir / "frames.json");
   if (!done.is_null() && done.value("key", json()) == key) {
     st.names = done["names"].get<std::vector<std::string>>();
@@ -78,30 +81,37 @@ FramesStage run_frames_stage(const RunOptions& o, const fs::path& cache) {
   }
   fs::create_directories(st.dir);
   FrameSourceOptions fo{o.max_frames, o.frame_step, o.first_frame};
-  FrameSourceInfo info = read_frames(o.input, fo, [&](int k, const std::string& name, const cv::Mat& bgr) {
-    cv::Mat img = bgr;
-    int long_side = std::max(bgr.cols, bgr.rows);
-    if (o.flow_long_side > 0 && long_side > o.flow_long_side) {
-      double s = double(o.flow_long_side) / long_side;
-      cv::resize(bgr, img, cv::Size(std::lround(bgr.cols * s), std::lround(bgr.rows * s)), 0, 0,
-                 cv::INTER_AREA);
-    }
-    fs::path p = st.dir / (name + ".png");
-    write_atomically(p, [&](const fs::path& tmp) {
-      if (!cv::imwrite(tmp.string(), img)) fail(ErrorCategory::io, "{}: cannot write", p.string());
-    });
-    st.width = img.cols;
-    st.height = img.rows;
-    report(o, "frames", k + 1, 0, name);
-  });
+  FrameSourceInfo info =
+      read_frames(o.input, fo, [&](int k, const std::string& name, const cv::Mat& bgr) {
+        cv::Mat img = bgr;
+        int long_side = std::max(bgr.cols, bgr.rows);
+        if (o.flow_long_side > 0 && long_side > o.flow_long_side) {
+          double s = double(o.flow_long_side) / long_side;
+          cv::resize(bgr, img, cv::Size(std::lround(bgr.cols * s), std::lround(bgr.rows * s)), 0, 0,
+                     cv::INTER_AREA);
+        }
+        fs::path p = st.dir / (name + ".png");
+        write_atomically(p, [&](const fs::path& tmp) {
+          if (!cv::imwrite(tmp.string(), img))
+            fail(ErrorCategory::io, "{}: cannot write", p.string());
+        });
+        st.width = img.cols;
+        st.height = img.rows;
+        report(o, "frames", k + 1, 0, name);
+      });
   st.names = info.names;
   st.input_width = info.width;
   st.input_height = info.height;
   st.fps = info.fps;
   std::set<std::string> unique(st.names.begin(), st.names.end());
   CVD_CHECK(unique.size() == st.names.size(), "{}: frame names are not unique", o.input.string());
-  json j = {{"key", key}, {"names", st.names}, {"width", st.width}, {"height", st.height},
-            {"input_width", st.input_width}, {"input_height", st.input_height}, {"fps", st.fps}};
+  json j = {{"key", key},
+            {"names", st.names},
+            {"width", st.width},
+            {"height", st.height},
+            {"input_width", st.input_width},
+            {"input_height", st.input_height},
+            {"fps", st.fps}};
   write_text_file(st.dir / "frames.json", j.dump(1));
   return st;
 }
@@ -120,7 +130,8 @@ std::optional<Intrinsics> user_intrinsics(const RunOptions& o, const FramesStage
     return k.scaled_to(f.width, f.height);
   }
   if (o.fov_deg > 0) {
-    CVD_CHECK(o.fov_deg > 5 && o.fov_deg < 170, "--fov {} degrees is implausible (5..170)", o.fov_deg);
+    CVD_CHECK(o.fov_deg > 5 && o.fov_deg < 170, "--fov {} degrees is implausible (5..170)",
+              o.fov_deg);
     double fx = 0.5 * f.width / std::tan(0.5 * o.fov_deg * M_PI / 180.0);
     return Intrinsics{fx, fx, 0.5 * f.width - 0.5, 0.5 * f.height - 0.5, f.width, f.height};
   }
@@ -191,7 +202,8 @@ std::vector<FrameCamera> cameras_from_file(const RunOptions& o, const FramesStag
       if (!im) spdlog::warn("poses: frame '{}' is not in {}", f.names[k], o.poses_file.string());
     }
   } else {
-    fail(ErrorCategory::invalid_argument, "unknown poses format '{}' (tum, colmap or kitti)", fmt_name);
+    fail(ErrorCategory::invalid_argument, "unknown poses format '{}' (tum, colmap or kitti)",
+         fmt_name);
   }
   return cams;
 }
@@ -252,7 +264,8 @@ PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::
           fs::path mp = o.masks / (f.names[k] + ".png");
           if (fs::exists(mp)) {
             cf.mask = cv::imread(mp.string(), cv::IMREAD_GRAYSCALE);
-            if (cf.mask.size() != cf.image.size()) cv::resize(cf.mask, cf.mask, cf.image.size(), 0, 0, cv::INTER_NEAREST);
+            if (cf.mask.size() != cf.image.size())
+              cv::resize(cf.mask, cf.mask, cf.image.size(), 0, 0, cv::INTER_NEAREST);
           }
         }
         frames.push_back(std::move(cf));
@@ -263,14 +276,18 @@ PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::
         spdlog::warn("poses: COLMAP did not register {} frame(s): {}", r.unregistered.size(),
                      fmt::format("{}", fmt::join(r.unregistered, ", ")));
       model = r.model;
-      st.info = {{"colmap_models", r.num_models}, {"colmap_attempts", r.attempts},
-                 {"colmap_seconds", r.seconds}, {"unregistered", r.unregistered},
+      st.info = {{"colmap_models", r.num_models},
+                 {"colmap_attempts", r.attempts},
+                 {"colmap_seconds", r.seconds},
+                 {"unregistered", r.unregistered},
                  {"warnings", r.warnings}};
       if (!K) {
         json cands = json::array();
         for (const auto& c : r.focal_candidates)
-          cands.push_back({{"focal_px", c.focal_px}, {"fov_x_deg", c.fov_x_deg},
-                           {"registered", c.registered}, {"models", c.num_models},
+          cands.push_back({{"focal_px", c.focal_px},
+                           {"fov_x_deg", c.fov_x_deg},
+                           {"registered", c.registered},
+                           {"models", c.num_models},
                            {"points", c.points},
                            {"mean_reprojection_error_px", c.mean_reprojection_error},
                            {"seconds", c.seconds}});
@@ -356,7 +373,8 @@ FlowStage run_flow_stage(const RunOptions& o, const FramesStage& f, const PosesS
   std::unique_ptr<FlowEstimator> estimator;
   if (o.flow == "flownet2") {
     CVD_CHECK(!o.flow_model.empty(),
-              "--flow flownet2 needs --flow-model FILE.cvdw (no pretrained weights ship; see cvd convert)");
+              "--flow flownet2 needs --flow-model FILE.cvdw (no pretrained weights ship; see cvd "
+              "convert)");
     estimator = std::make_unique<FlowNet2Estimator>(o.flow_model);
   } else {
     CVD_CHECK(o.flow == "dis", "unknown flow method '{}' (dis or flownet2)", o.flow);
@@ -367,8 +385,11 @@ FlowStage run_flow_stage(const RunOptions& o, const FramesStage& f, const PosesS
   FlowEstimator& dis = *estimator;
   FlowPairOptions popt;
   popt.fb_threshold_px = o.fb_threshold_px;
-  json key = {{"method", dis.name()}, {"fb", o.fb_threshold_px}, {"w", depth_size.width},
-              {"h", depth_size.height}, {"frames_w", f.width}};
+  json key = {{"method", dis.name()},
+              {"fb", o.fb_threshold_px},
+              {"w", depth_size.width},
+              {"h", depth_size.height},
+              {"frames_w", f.width}};
   int done = 0;
   std::map<int, ImageKeypoints> keypoint_cache;
   for (const FramePair& p : pairs) {
@@ -383,14 +404,17 @@ FlowStage run_flow_stage(const RunOptions& o, const FramesStage& f, const PosesS
       if (m["kept"].get<bool>()) {
         d.forward = read_flo(dir / (stem + ".fwd.flo"));
         d.backward = read_flo(dir / (stem + ".bwd.flo"));
-        d.forward_mask = cv::imread((dir / (stem + ".fwd_mask.png")).string(), cv::IMREAD_GRAYSCALE);
-        d.backward_mask = cv::imread((dir / (stem + ".bwd_mask.png")).string(), cv::IMREAD_GRAYSCALE);
+        d.forward_mask =
+            cv::imread((dir / (stem + ".fwd_mask.png")).string(), cv::IMREAD_GRAYSCALE);
+        d.backward_mask =
+            cv::imread((dir / (stem + ".bwd_mask.png")).string(), cv::IMREAD_GRAYSCALE);
       }
     } else {
       // Keypoints are detected once per frame and reused by every pair that frame is in.
       auto keypoints = [&](int k, const cv::Mat& img) -> const ImageKeypoints& {
         auto it = keypoint_cache.find(k);
-        if (it == keypoint_cache.end()) it = keypoint_cache.emplace(k, detect_keypoints(img, popt.homography)).first;
+        if (it == keypoint_cache.end())
+          it = keypoint_cache.emplace(k, detect_keypoints(img, popt.homography)).first;
         return it->second;
       };
       cv::Mat img_i = f.load(p.first), img_j = f.load(p.second);
@@ -406,15 +430,20 @@ FlowStage run_flow_stage(const RunOptions& o, const FramesStage& f, const PosesS
         d.backward_mask = resize_mask(r.backward_mask, depth_size);
         write_flo(dir / (stem + ".fwd.flo"), d.forward);
         write_flo(dir / (stem + ".bwd.flo"), d.backward);
-        for (auto [suffix, mat] : {std::pair{".fwd_mask.png", &d.forward_mask}, {".bwd_mask.png", &d.backward_mask}}) {
+        for (auto [suffix, mat] :
+             {std::pair{".fwd_mask.png", &d.forward_mask}, {".bwd_mask.png", &d.backward_mask}}) {
           fs::path mp = dir / (stem + suffix);
           write_atomically(mp, [&](const fs::path& tmp) {
-            if (!cv::imwrite(tmp.string(), *mat)) fail(ErrorCategory::io, "{}: cannot write", mp.string());
+            if (!cv::imwrite(tmp.string(), *mat))
+              fail(ErrorCategory::io, "{}: cannot write", mp.string());
           });
         }
       }
-      json mj = {{"key", key}, {"kept", kept}, {"forward_valid", d.forward_valid},
-                 {"backward_valid", d.backward_valid}, {"homography_fallback", r.homography.reason}};
+      json mj = {{"key", key},
+                 {"kept", kept},
+                 {"forward_valid", d.forward_valid},
+                 {"backward_valid", d.backward_valid},
+                 {"homography_fallback", r.homography.reason}};
       write_text_file(meta, mj.dump());
     }
     if (!d.forward.empty())

@@ -17,19 +17,21 @@ namespace cvd {
 
 struct FramesStage {
   std::vector<std::string> names;
-  int width = 0, height = 0;      // of the cached frames (the input, capped at the flow size)
+  int width = 0, height = 0;  // of the cached frames (the input, capped at the flow size)
   int input_width = 0, input_height = 0;
   double fps = 30;
-  std::filesystem::path dir;      // cache/frames/<name>.png
-  cv::Mat load(int k) const;      // BGR at the cached size
+  std::filesystem::path dir;  // cache/frames/<name>.png
+  cv::Mat load(int k) const;  // BGR at the cached size
 };
 FramesStage run_frames_stage(const RunOptions& o, const std::filesystem::path& cache);
 
 struct PosesStage {
-  std::vector<FrameCamera> cameras;  // per frame, at the cached frames' resolution; !registered = no pose
-  std::vector<std::vector<Eigen::Vector3d>> points;  // SfM points each frame observes (may be empty)
-  std::string source;                // "colmap", "tum file ...", ...
-  std::string intrinsics_source;     // "user", "fov", "colmap estimate"
+  std::vector<FrameCamera>
+      cameras;  // per frame, at the cached frames' resolution; !registered = no pose
+  std::vector<std::vector<Eigen::Vector3d>>
+      points;                     // SfM points each frame observes (may be empty)
+  std::string source;             // "colmap", "tum file ...", ...
+  std::string intrinsics_source;  // "user", "fov", "colmap estimate"
   double seconds = 0;
   nlohmann::json info;
 };
@@ -38,12 +40,12 @@ PosesStage run_poses_stage(const RunOptions& o, const FramesStage& frames,
 
 struct FlowPairData {
   FramePair pair;
-  cv::Mat forward, backward;           // CV_32FC2 at the depth resolution
-  cv::Mat forward_mask, backward_mask; // CV_8U (255 valid)
+  cv::Mat forward, backward;            // CV_32FC2 at the depth resolution
+  cv::Mat forward_mask, backward_mask;  // CV_8U (255 valid)
   double forward_valid = 0, backward_valid = 0;
 };
 struct FlowStage {
-  std::vector<FlowPairData> pairs;     // kept pairs
+  std::vector<FlowPairData> pairs;  // kept pairs
   int dropped = 0;
   double seconds = 0;
 };

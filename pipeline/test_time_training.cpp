@@ -5,8 +5,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
-#include <limits>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
 
@@ -92,8 +92,8 @@ std::map<int, Tensor> batch_depths(DepthNet& net, const std::function<Tensor(int
   return r;
 }
 
-Tensor batch_loss(const std::map<int, Tensor>& depths, const std::vector<const TrainingPair*>& batch,
-                  const GeometricLossOptions& lo) {
+Tensor batch_loss(const std::map<int, Tensor>& depths,
+                  const std::vector<const TrainingPair*>& batch, const GeometricLossOptions& lo) {
   Tensor total;
   for (auto* p : batch) {
     Tensor l = geometric_loss_pair(depths.at(p->i), depths.at(p->j), p->ij, p->ji, lo).total;
@@ -136,15 +136,15 @@ NanLossFault nan_loss_fault_from_env() {
       pos = end + 1;
     }
   }
-  spdlog::warn("fault injection: CVD_FAULT_NAN_LOSS_STEPS={} (these training losses become NaN)", s);
+  spdlog::warn("fault injection: CVD_FAULT_NAN_LOSS_STEPS={} (these training losses become NaN)",
+               s);
   return f;
 }
 
 }  // namespace
 
 TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& load_frame,
-                               const std::vector<TrainingPair>& pairs,
-                               const TrainingOptions& o) {
+                               const std::vector<TrainingPair>& pairs, const TrainingOptions& o) {
   CVD_CHECK(!pairs.empty(), "test-time training needs at least one frame pair");
   CVD_CHECK(o.batch_pairs >= 1 && o.epochs >= 0 && o.lr > 0, "bad training options");
   AdamOptions ao;
@@ -177,7 +177,8 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
     for (int s = 0; s < steps_per_epoch; ++s) {
       if (o.cancelled && o.cancelled()) fail(ErrorCategory::cancelled, "training cancelled");
       std::vector<const TrainingPair*> batch;
-      for (size_t k = s * o.batch_pairs; k < std::min(order.size(), size_t(s + 1) * o.batch_pairs); ++k)
+      for (size_t k = s * o.batch_pairs; k < std::min(order.size(), size_t(s + 1) * o.batch_pairs);
+           ++k)
         batch.push_back(&pairs[order[k]]);
       adam.zero_grad();
       Tensor loss = batch_loss(batch_depths(net, load_frame, batch), batch, lo);
@@ -227,8 +228,7 @@ double evaluate_geometric_loss(DepthNet& net, const std::function<Tensor(int)>& 
   double sum = 0;
   for (const auto& p : pairs) {
     for (int f : {p.i, p.j})
-      if (!cache.count(f))
-        cache[f] = net.depth(load_frame(f).unsqueeze(0)).squeeze(0).squeeze(0);
+      if (!cache.count(f)) cache[f] = net.depth(load_frame(f).unsqueeze(0)).squeeze(0).squeeze(0);
     sum += geometric_loss_pair(cache[p.i], cache[p.j], p.ij, p.ji, lo).total.item();
   }
   net.train(was_training);

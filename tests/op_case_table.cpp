@@ -50,15 +50,13 @@ OpCase conv_case(const std::string& name, Shape x, Shape w, bool bias, Conv2dPar
           [p, bias](const In& t) { return conv2d(t[0], t[1], bias ? t[2] : Tensor(), p); }, 5e-5};
 }
 
-OpCase deconv_case(const std::string& name, Shape x, Shape w, bool bias,
-                   ConvTranspose2dParams p) {
+OpCase deconv_case(const std::string& name, Shape x, Shape w, bool bias, ConvTranspose2dParams p) {
   std::vector<InputSpec> in{{x}, {w}};
   if (bias) in.push_back({{w[1] * p.groups}});
-  return {name, in,
-          [p, bias](const In& t) {
-            return conv_transpose2d(t[0], t[1], bias ? t[2] : Tensor(), p);
-          },
-          5e-5};
+  return {
+      name, in,
+      [p, bias](const In& t) { return conv_transpose2d(t[0], t[1], bias ? t[2] : Tensor(), p); },
+      5e-5};
 }
 
 OpCase bn_case(const std::string& name, bool training, bool affine) {
@@ -83,8 +81,10 @@ std::vector<OpCase> all_op_cases() {
   // ---- unary ----
   c.push_back(unary_case("relu", Init::away_from_zero, [](auto& x) { return relu(x); }));
   c.push_back(unary_case("relu6", Init::away_from_zero, [](auto& x) { return relu6(x * 4.0); }));
-  c.push_back(unary_case("clamp", Init::away_from_zero, [](auto& x) { return clamp(x, -0.7, 0.5); }));
-  c.push_back(unary_case("leaky_relu", Init::away_from_zero, [](auto& x) { return leaky_relu(x, 0.1); }));
+  c.push_back(
+      unary_case("clamp", Init::away_from_zero, [](auto& x) { return clamp(x, -0.7, 0.5); }));
+  c.push_back(
+      unary_case("leaky_relu", Init::away_from_zero, [](auto& x) { return leaky_relu(x, 0.1); }));
   c.push_back(unary_case("sigmoid", Init::normal, [](auto& x) { return sigmoid(x); }));
   c.push_back(unary_case("tanh", Init::normal, [](auto& x) { return tanh(x); }));
   c.push_back(unary_case("exp", Init::normal, [](auto& x) { return exp(x); }));
@@ -102,48 +102,76 @@ std::vector<OpCase> all_op_cases() {
   };
   bin("add_same", {3, 4, 5}, {3, 4, 5}, Init::normal, [](auto& a, auto& b) { return add(a, b); });
   bin("add_bcast_row", {3, 4, 5}, {5}, Init::normal, [](auto& a, auto& b) { return add(a, b); });
-  bin("sub_bcast_mid", {2, 3, 4, 5}, {3, 1, 1}, Init::normal, [](auto& a, auto& b) { return sub(a, b); });
-  bin("mul_bcast_both", {3, 1, 5}, {1, 4, 1}, Init::normal, [](auto& a, auto& b) { return mul(a, b); });
+  bin("sub_bcast_mid", {2, 3, 4, 5}, {3, 1, 1}, Init::normal,
+      [](auto& a, auto& b) { return sub(a, b); });
+  bin("mul_bcast_both", {3, 1, 5}, {1, 4, 1}, Init::normal,
+      [](auto& a, auto& b) { return mul(a, b); });
   bin("mul_scalar_tensor", {2, 3, 4}, {}, Init::normal, [](auto& a, auto& b) { return mul(a, b); });
   bin("div_bcast", {2, 3, 4}, {3, 1}, Init::positive, [](auto& a, auto& b) { return div(a, b); });
   bin("minimum", {3, 4, 5}, {4, 5}, Init::normal, [](auto& a, auto& b) { return minimum(a, b); });
-  bin("maximum", {3, 4, 5}, {3, 4, 5}, Init::normal, [](auto& a, auto& b) { return maximum(a, b); });
-  c.push_back({"where",
-               {{{3, 4, 5}, Init::mask, false}, {{3, 4, 5}}, {{4, 1}}},
-               [](const In& t) { return where(t[0], t[1], t[2]); }});
+  bin("maximum", {3, 4, 5}, {3, 4, 5}, Init::normal,
+      [](auto& a, auto& b) { return maximum(a, b); });
+  c.push_back({"where", {{{3, 4, 5}, Init::mask, false}, {{3, 4, 5}}, {{4, 1}}}, [](const In& t) {
+                 return where(t[0], t[1], t[2]);
+               }});
   // ---- reductions ----
   c.push_back({"sum_all", {{{3, 4, 5}}}, [](const In& t) { return sum(t[0]); }});
-  c.push_back({"sum_dims_keep", {{{2, 3, 4, 5}}}, [](const In& t) { return sum(t[0], {0, 2, 3}, true); }});
+  c.push_back({"sum_dims_keep", {{{2, 3, 4, 5}}}, [](const In& t) {
+                 return sum(t[0], {0, 2, 3}, true);
+               }});
   c.push_back({"sum_last", {{{3, 4, 7}}}, [](const In& t) { return sum(t[0], {-1}); }});
   c.push_back({"mean_hw", {{{2, 3, 4, 5}}}, [](const In& t) { return mean(t[0], {2, 3}); }});
   // ---- shape and layout ----
   c.push_back({"reshape", {{{3, 4, 5}}}, [](const In& t) { return reshape(t[0], {5, -1}) * 1.5; }});
-  c.push_back({"permute", {{{2, 3, 4, 5}}}, [](const In& t) { return permute(t[0], {0, 2, 3, 1}).contiguous(); }});
-  c.push_back({"transpose_matmul", {{{3, 4}}, {{5, 4}}}, [](const In& t) { return matmul(t[0], transpose(t[1], 0, 1)); }});
-  c.push_back({"squeeze_unsqueeze", {{{3, 1, 5}}}, [](const In& t) { return unsqueeze(squeeze(t[0], 1), 0) * 2.0; }});
+  c.push_back({"permute", {{{2, 3, 4, 5}}}, [](const In& t) {
+                 return permute(t[0], {0, 2, 3, 1}).contiguous();
+               }});
+  c.push_back({"transpose_matmul", {{{3, 4}}, {{5, 4}}}, [](const In& t) {
+                 return matmul(t[0], transpose(t[1], 0, 1));
+               }});
+  c.push_back({"squeeze_unsqueeze", {{{3, 1, 5}}}, [](const In& t) {
+                 return unsqueeze(squeeze(t[0], 1), 0) * 2.0;
+               }});
   c.push_back({"narrow", {{{3, 7, 5}}}, [](const In& t) { return narrow(t[0], 1, 2, 4) * 3.0; }});
-  c.push_back({"expand", {{{3, 1, 5}}}, [](const In& t) { return expand(t[0], {2, 3, 4, 5}) * 1.0; }});
-  c.push_back({"concat_dim1", {{{2, 3, 4, 5}}, {{2, 1, 4, 5}}, {{2, 2, 4, 5}}},
-               [](const In& t) { return concat({t[0], t[1], t[2]}, 1); }});
-  c.push_back({"concat_last", {{{2, 3, 4}}, {{2, 3, 1}}}, [](const In& t) { return concat({t[0], t[1]}, -1); }});
-  c.push_back({"pad_asym", {{{2, 3, 4, 5}}}, [](const In& t) { return pad(t[0], {0, 1, 1, 2}, 0.5); }});
-  c.push_back({"pad_crop", {{{2, 3, 6, 5}}}, [](const In& t) { return pad(t[0], {-1, 2, 1, -2}); }});
+  c.push_back({"expand", {{{3, 1, 5}}}, [](const In& t) {
+                 return expand(t[0], {2, 3, 4, 5}) * 1.0;
+               }});
+  c.push_back({"concat_dim1", {{{2, 3, 4, 5}}, {{2, 1, 4, 5}}, {{2, 2, 4, 5}}}, [](const In& t) {
+                 return concat({t[0], t[1], t[2]}, 1);
+               }});
+  c.push_back({"concat_last", {{{2, 3, 4}}, {{2, 3, 1}}}, [](const In& t) {
+                 return concat({t[0], t[1]}, -1);
+               }});
+  c.push_back({"pad_asym", {{{2, 3, 4, 5}}}, [](const In& t) {
+                 return pad(t[0], {0, 1, 1, 2}, 0.5);
+               }});
+  c.push_back({"pad_crop", {{{2, 3, 6, 5}}}, [](const In& t) {
+                 return pad(t[0], {-1, 2, 1, -2});
+               }});
   // ---- convolution ----
   c.push_back(conv_case("conv3x3_p1_bias", {2, 3, 7, 6}, {4, 3, 3, 3}, true, conv(1, 1, 1, 1, 1)));
-  c.push_back(conv_case("conv3x3_s2_nobias", {2, 3, 9, 8}, {4, 3, 3, 3}, false, conv(2, 1, 1, 1, 1)));
-  c.push_back(conv_case("conv_tf_same_k3s2", {1, 2, 8, 7}, {3, 2, 3, 3}, false, conv(2, 0, 1, 0, 1)));
-  c.push_back(conv_case("conv_tf_same_k5s2", {1, 2, 9, 8}, {3, 2, 5, 5}, false, conv(2, 1, 2, 1, 2)));
+  c.push_back(
+      conv_case("conv3x3_s2_nobias", {2, 3, 9, 8}, {4, 3, 3, 3}, false, conv(2, 1, 1, 1, 1)));
+  c.push_back(
+      conv_case("conv_tf_same_k3s2", {1, 2, 8, 7}, {3, 2, 3, 3}, false, conv(2, 0, 1, 0, 1)));
+  c.push_back(
+      conv_case("conv_tf_same_k5s2", {1, 2, 9, 8}, {3, 2, 5, 5}, false, conv(2, 1, 2, 1, 2)));
   c.push_back(conv_case("conv_dilated", {1, 2, 9, 9}, {3, 2, 3, 3}, true, conv(1, 2, 2, 2, 2, 2)));
-  c.push_back(conv_case("conv_groups2", {2, 4, 6, 5}, {6, 2, 3, 3}, true, conv(1, 1, 1, 1, 1, 1, 2)));
-  c.push_back(conv_case("conv_depthwise5x5", {2, 4, 7, 7}, {4, 1, 5, 5}, false, conv(1, 2, 2, 2, 2, 1, 4)));
-  c.push_back(conv_case("conv_depthwise_s2", {1, 3, 8, 8}, {3, 1, 3, 3}, false, conv(2, 0, 1, 0, 1, 1, 3)));
+  c.push_back(
+      conv_case("conv_groups2", {2, 4, 6, 5}, {6, 2, 3, 3}, true, conv(1, 1, 1, 1, 1, 1, 2)));
+  c.push_back(
+      conv_case("conv_depthwise5x5", {2, 4, 7, 7}, {4, 1, 5, 5}, false, conv(1, 2, 2, 2, 2, 1, 4)));
+  c.push_back(
+      conv_case("conv_depthwise_s2", {1, 3, 8, 8}, {3, 1, 3, 3}, false, conv(2, 0, 1, 0, 1, 1, 3)));
   c.push_back(conv_case("conv1x1", {2, 5, 4, 3}, {7, 5, 1, 1}, true, conv(1, 0, 0, 0, 0)));
   c.push_back(conv_case("conv7x7_s2_p3", {1, 3, 11, 10}, {2, 3, 7, 7}, false, conv(2, 3, 3, 3, 3)));
   c.push_back(conv_case("conv_1px_image", {2, 3, 1, 1}, {4, 3, 3, 3}, true, conv(1, 1, 1, 1, 1)));
-  c.push_back(conv_case("conv_stride3_odd", {1, 2, 10, 7}, {2, 2, 2, 3}, true, conv(3, 0, 0, 1, 1)));
+  c.push_back(
+      conv_case("conv_stride3_odd", {1, 2, 10, 7}, {2, 2, 2, 3}, true, conv(3, 0, 0, 1, 1)));
   c.push_back(deconv_case("deconv_k4s2p1", {2, 3, 4, 5}, {3, 2, 4, 4}, true, deconv(2, 1, 0)));
   c.push_back(deconv_case("deconv_outpad", {1, 2, 3, 4}, {2, 3, 3, 3}, false, deconv(2, 1, 1)));
-  c.push_back(deconv_case("deconv_groups_dil", {1, 4, 3, 3}, {4, 1, 3, 3}, true, deconv(1, 1, 0, 2, 2)));
+  c.push_back(
+      deconv_case("deconv_groups_dil", {1, 4, 3, 3}, {4, 1, 3, 3}, true, deconv(1, 1, 0, 2, 2)));
   c.push_back(deconv_case("deconv_1px", {2, 2, 1, 1}, {2, 3, 4, 4}, true, deconv(2, 1, 0)));
   // ---- batch norm ----
   c.push_back(bn_case("batch_norm_train_affine", true, true));
@@ -151,33 +179,65 @@ std::vector<OpCase> all_op_cases() {
   c.push_back(bn_case("batch_norm_eval_affine", false, true));
   c.push_back(bn_case("batch_norm_eval_plain", false, false));
   // ---- pooling ----
-  c.push_back({"max_pool3x3_s2_p1", {{{2, 3, 7, 6}}}, [](const In& t) { return max_pool2d(t[0], pool(3, 2, 1, false)); }});
-  c.push_back({"max_pool2_ceil", {{{1, 2, 5, 7}}}, [](const In& t) { return max_pool2d(t[0], pool(2, 2, 0, true)); }});
-  c.push_back({"avg_pool2", {{{2, 3, 6, 8}}}, [](const In& t) { return avg_pool2d(t[0], pool(2, 2, 0, false)); }});
-  c.push_back({"avg_pool3_p1_ceil", {{{1, 2, 7, 6}}}, [](const In& t) { return avg_pool2d(t[0], pool(3, 2, 1, true)); }});
-  c.push_back({"avg_pool3_p1_nopad", {{{1, 2, 7, 6}}}, [](const In& t) { return avg_pool2d(t[0], pool(3, 2, 1, true, false)); }});
+  c.push_back({"max_pool3x3_s2_p1", {{{2, 3, 7, 6}}}, [](const In& t) {
+                 return max_pool2d(t[0], pool(3, 2, 1, false));
+               }});
+  c.push_back({"max_pool2_ceil", {{{1, 2, 5, 7}}}, [](const In& t) {
+                 return max_pool2d(t[0], pool(2, 2, 0, true));
+               }});
+  c.push_back({"avg_pool2", {{{2, 3, 6, 8}}}, [](const In& t) {
+                 return avg_pool2d(t[0], pool(2, 2, 0, false));
+               }});
+  c.push_back({"avg_pool3_p1_ceil", {{{1, 2, 7, 6}}}, [](const In& t) {
+                 return avg_pool2d(t[0], pool(3, 2, 1, true));
+               }});
+  c.push_back({"avg_pool3_p1_nopad", {{{1, 2, 7, 6}}}, [](const In& t) {
+                 return avg_pool2d(t[0], pool(3, 2, 1, true, false));
+               }});
   // ---- resizing ----
-  c.push_back({"bilinear_up2_ac", {{{2, 3, 4, 5}}}, [](const In& t) { return upsample_bilinear2d(t[0], 8, 10, true); }});
-  c.push_back({"bilinear_up2_noac", {{{2, 3, 4, 5}}}, [](const In& t) { return upsample_bilinear2d(t[0], 8, 10, false); }});
-  c.push_back({"bilinear_odd_ac", {{{1, 2, 5, 3}}}, [](const In& t) { return upsample_bilinear2d(t[0], 7, 11, true); }});
-  c.push_back({"bilinear_down_noac", {{{1, 2, 9, 7}}}, [](const In& t) { return upsample_bilinear2d(t[0], 4, 3, false); }});
-  c.push_back({"bilinear_from_1px", {{{1, 2, 1, 1}}}, [](const In& t) { return upsample_bilinear2d(t[0], 3, 2, true); }});
-  c.push_back({"bilinear_to_1px", {{{1, 2, 4, 3}}}, [](const In& t) { return upsample_bilinear2d(t[0], 1, 1, false); }});
-  c.push_back({"nearest_up", {{{2, 3, 4, 5}}}, [](const In& t) { return upsample_nearest2d(t[0], 8, 10); }});
-  c.push_back({"nearest_odd", {{{1, 2, 5, 3}}}, [](const In& t) { return upsample_nearest2d(t[0], 7, 4); }});
+  c.push_back({"bilinear_up2_ac", {{{2, 3, 4, 5}}}, [](const In& t) {
+                 return upsample_bilinear2d(t[0], 8, 10, true);
+               }});
+  c.push_back({"bilinear_up2_noac", {{{2, 3, 4, 5}}}, [](const In& t) {
+                 return upsample_bilinear2d(t[0], 8, 10, false);
+               }});
+  c.push_back({"bilinear_odd_ac", {{{1, 2, 5, 3}}}, [](const In& t) {
+                 return upsample_bilinear2d(t[0], 7, 11, true);
+               }});
+  c.push_back({"bilinear_down_noac", {{{1, 2, 9, 7}}}, [](const In& t) {
+                 return upsample_bilinear2d(t[0], 4, 3, false);
+               }});
+  c.push_back({"bilinear_from_1px", {{{1, 2, 1, 1}}}, [](const In& t) {
+                 return upsample_bilinear2d(t[0], 3, 2, true);
+               }});
+  c.push_back({"bilinear_to_1px", {{{1, 2, 4, 3}}}, [](const In& t) {
+                 return upsample_bilinear2d(t[0], 1, 1, false);
+               }});
+  c.push_back({"nearest_up", {{{2, 3, 4, 5}}}, [](const In& t) {
+                 return upsample_nearest2d(t[0], 8, 10);
+               }});
+  c.push_back({"nearest_odd", {{{1, 2, 5, 3}}}, [](const In& t) {
+                 return upsample_nearest2d(t[0], 7, 4);
+               }});
   // ---- matmul / linear ----
   c.push_back({"matmul_2d", {{{3, 4}}, {{4, 5}}}, [](const In& t) { return matmul(t[0], t[1]); }});
-  c.push_back({"matmul_batched", {{{2, 3, 4}}, {{2, 4, 5}}}, [](const In& t) { return matmul(t[0], t[1]); }});
-  c.push_back({"matmul_shared_b", {{{2, 3, 4}}, {{4, 2}}}, [](const In& t) { return matmul(t[0], t[1]); }});
-  c.push_back({"linear", {{{3, 6}}, {{4, 6}}, {{4}}}, [](const In& t) { return linear(t[0], t[1], t[2]); }});
+  c.push_back({"matmul_batched", {{{2, 3, 4}}, {{2, 4, 5}}}, [](const In& t) {
+                 return matmul(t[0], t[1]);
+               }});
+  c.push_back(
+      {"matmul_shared_b", {{{2, 3, 4}}, {{4, 2}}}, [](const In& t) { return matmul(t[0], t[1]); }});
+  c.push_back({"linear", {{{3, 6}}, {{4, 6}}, {{4}}}, [](const In& t) {
+                 return linear(t[0], t[1], t[2]);
+               }});
   // ---- grid_sample ----
   for (bool ac : {false, true}) {
     for (GridPadding pad : {GridPadding::zeros, GridPadding::border}) {
-      std::string n = std::string("grid_sample_") + (pad == GridPadding::zeros ? "zeros" : "border") +
-                      (ac ? "_ac" : "_noac");
+      std::string n = std::string("grid_sample_") +
+                      (pad == GridPadding::zeros ? "zeros" : "border") + (ac ? "_ac" : "_noac");
       GridSampleParams p{pad, ac};
-      c.push_back({n, {{{2, 3, 5, 6}}, {{2, 4, 3, 2}, Init::grid}},
-                   [p](const In& t) { return grid_sample(t[0], t[1], p); }});
+      c.push_back({n, {{{2, 3, 5, 6}}, {{2, 4, 3, 2}, Init::grid}}, [p](const In& t) {
+                     return grid_sample(t[0], t[1], p);
+                   }});
     }
   }
   // ---- correlation (FlowNetC) and channel_norm ----

@@ -167,8 +167,7 @@ TEST(CudaEmulated, AdamAndSgdUpdates) {
   }
 }
 
-// ---- layout
-// -----------------------------------------------------------------------------------------
+// ---- layout -------------------------------------------------------------------------------------
 
 TEST(CudaEmulated, ReduceSumConcatPad) {
   Generator gen(5);
@@ -212,8 +211,7 @@ TEST(CudaEmulated, ReduceSumConcatPad) {
                0.0, "pad");
 }
 
-// ---- resampling
-// ----------------------------------------------------------------------------------
+// ---- resampling ---------------------------------------------------------------------------------
 
 TEST(CudaEmulated, BilinearAndNearestResizeForwardAndBackward) {
   Generator gen(6);
@@ -264,8 +262,7 @@ TEST(CudaEmulated, GridSampleForwardAndBackward) {
   }
 }
 
-// ---- normalisation and pooling
-// -------------------------------------------------------------------
+// ---- normalisation and pooling ------------------------------------------------------------------
 
 TEST(CudaEmulated, BatchNormTrainAndEval) {
   Generator gen(8);
@@ -341,8 +338,7 @@ TEST(CudaEmulated, MaxAndAvgPoolForwardAndBackward) {
   }
 }
 
-// ---- convolutions
-// --------------------------------------------------------------------------------
+// ---- convolutions -------------------------------------------------------------------------------
 
 TEST(CudaEmulated, Conv2dForwardAndBackward) {
   Generator gen(10);

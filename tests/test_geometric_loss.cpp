@@ -71,7 +71,8 @@ TEST(GeometricLoss, MatchesPyTorchLossAndGradients) {
 TEST(GeometricLoss, F32MatchesF64) {
   Fixture f = load();
   GeometricLoss l64 = geometric_loss_pair(f.di, f.dj, f.ij, f.ji, f.opt);
-  GeometricLoss l32 = geometric_loss_pair(f.di.to(DType::f32), f.dj.to(DType::f32), f.ij, f.ji, f.opt);
+  GeometricLoss l32 =
+      geometric_loss_pair(f.di.to(DType::f32), f.dj.to(DType::f32), f.ij, f.ji, f.opt);
   EXPECT_NEAR(l32.total.item(), l64.total.item(), 1e-5 * std::abs(l64.total.item()));
 }
 

@@ -156,8 +156,7 @@ TEST(ExifFocal, ThirtyFiveMillimetreEquivalentToPixels) {
   EXPECT_LT(fov_from_focal(4032, f), 70.0);
 }
 
-// ---- search scoring
-// -------------------------------------------------------------------------------
+// ---- search scoring -----------------------------------------------------------------------------
 
 TEST(FocalSearch, FieldOfViewAndFocalAreInverse) {
   EXPECT_NEAR(focal_from_fov(640, 90.0), 320.0, 1e-9);
@@ -203,8 +202,7 @@ TEST(FocalSearch, ImplausibleFocalWarningNamesFocalAndFieldOfView) {
   EXPECT_NE(w.find("145"), std::string::npos) << w;
 }
 
-// ---- COLMAP focal search
-// ----------------------------------------------------------------------------
+// ---- COLMAP focal search ------------------------------------------------------------------------
 
 std::vector<ColmapFrame> synthetic_frames(const SyntheticScene& scene) {
   std::vector<ColmapFrame> frames;

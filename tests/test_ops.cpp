@@ -21,11 +21,21 @@ Tensor make_input(const InputSpec& s, Generator& g) {
   std::vector<double> v(shape_numel(s.shape));
   for (auto& x : v) {
     switch (s.init) {
-      case Init::normal: x = g.normal(); break;
-      case Init::positive: x = 0.5 + 1.5 * g.uniform(); break;
-      case Init::away_from_zero: x = (0.2 + g.uniform()) * (g.uniform() < 0.5 ? -1 : 1); break;
-      case Init::grid: x = -1.1 + 2.2 * g.uniform(); break;
-      case Init::mask: x = g.uniform() < 0.5 ? 0.0 : 1.0; break;
+      case Init::normal:
+        x = g.normal();
+        break;
+      case Init::positive:
+        x = 0.5 + 1.5 * g.uniform();
+        break;
+      case Init::away_from_zero:
+        x = (0.2 + g.uniform()) * (g.uniform() < 0.5 ? -1 : 1);
+        break;
+      case Init::grid:
+        x = -1.1 + 2.2 * g.uniform();
+        break;
+      case Init::mask:
+        x = g.uniform() < 0.5 ? 0.0 : 1.0;
+        break;
     }
   }
   return Tensor::from_vector(v, s.shape, DType::f64);
@@ -123,8 +133,8 @@ TEST_P(OpTable, F32VsReference) {
     std::vector<double> a = g64[i].to_vector(), b = g32[i].to_vector();
     double gs = std::max(1.0, max_abs(a));
     for (size_t k = 0; k < a.size(); ++k)
-      ASSERT_NEAR(b[k], a[k], c.f32_tol * 4 * gs) << c.name << ": gradient of input " << i
-                                                  << " element " << k;
+      ASSERT_NEAR(b[k], a[k], c.f32_tol * 4 * gs)
+          << c.name << ": gradient of input " << i << " element " << k;
   }
 }
 
@@ -135,7 +145,8 @@ TEST(KernelCoverage, EveryOpHasReferenceAndCpuKernels) {
   const KernelRegistry& r = kernel_registry();
   for (int i = 0; i < kNumOps; ++i) {
     OpId op = static_cast<OpId>(i);
-    EXPECT_TRUE(r.has(op, DeviceType::cpu, DType::f64)) << "no reference kernel for " << op_name(op);
+    EXPECT_TRUE(r.has(op, DeviceType::cpu, DType::f64))
+        << "no reference kernel for " << op_name(op);
     EXPECT_TRUE(r.has(op, DeviceType::cpu, DType::f32)) << "no fast CPU kernel for " << op_name(op);
   }
 }

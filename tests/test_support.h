@@ -15,11 +15,11 @@ inline std::filesystem::path shared_data(const std::string& name) {
   return std::filesystem::exists(p) ? p : std::filesystem::path();
 }
 
-#define CVD_REQUIRE_SHARED_DATA(var, name)                                                 \
-  const std::filesystem::path var = ::cvd::test::shared_data(name);                       \
-  if (var.empty()) {                                                                       \
-    GTEST_SKIP() << "shared data '" << name << "' not found under " << CVD_SHARED_DIR      \
-                 << "/data (it exists in CI and on developer machines)";                   \
+#define CVD_REQUIRE_SHARED_DATA(var, name)                                            \
+  const std::filesystem::path var = ::cvd::test::shared_data(name);                   \
+  if (var.empty()) {                                                                  \
+    GTEST_SKIP() << "shared data '" << name << "' not found under " << CVD_SHARED_DIR \
+                 << "/data (it exists in CI and on developer machines)";              \
   }
 
 // A fresh empty directory under the system temp dir, removed when the object dies.
@@ -64,6 +64,8 @@ inline CommandResult run_command(const std::string& cmd) {
 }
 
 // Runs the cvd CLI with the given argument string.
-inline CommandResult run_cvd(const std::string& args) { return run_command(cli_path() + " " + args); }
+inline CommandResult run_cvd(const std::string& args) {
+  return run_command(cli_path() + " " + args);
+}
 
 }  // namespace cvd::test

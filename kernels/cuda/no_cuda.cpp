@@ -1,7 +1,7 @@
 // Built when the CUDA toolkit is absent: the CUDA backend registers no kernels and reports no
 // devices; asking for a CUDA tensor is a clear Error(unsupported).
-#include "engine/dispatch.h"
 #include "engine/backend_info.h"
+#include "engine/dispatch.h"
 
 namespace cvd {
 

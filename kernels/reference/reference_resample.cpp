@@ -31,7 +31,9 @@ LinearTaps linear_taps(int64_t o, int64_t in, int64_t out, bool align_corners) {
 
 // PyTorch "nearest": floor(o * scale) with PyTorch's float32 scale in / out (shared with the
 // fast kernels, so sizes where float rounding moves the index agree with PyTorch).
-int64_t nearest_source(int64_t o, int64_t in, int64_t out) { return nearest_source_index(o, in, out); }
+int64_t nearest_source(int64_t o, int64_t in, int64_t out) {
+  return nearest_source_index(o, in, out);
+}
 
 // x [N, C, H, W] and y [N, C, OH, OW] with equal N, C; returns N * C.
 int64_t resize_planes(const Tensor& x, const Tensor& y) {

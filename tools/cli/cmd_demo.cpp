@@ -40,8 +40,11 @@ void run_demo(DemoCommand& d) {
   apply_flag_strings(d.s, d.o);
   fs::path root = d.o.out;
   fs::path scene_dir = root / "scene";
-  nlohmann::json key = {{"w", d.scene.width}, {"h", d.scene.height}, {"n", d.scene.frames},
-                        {"seed", d.scene.seed}, {"moving", d.scene.moving_object}};
+  nlohmann::json key = {{"w", d.scene.width},
+                        {"h", d.scene.height},
+                        {"n", d.scene.frames},
+                        {"seed", d.scene.seed},
+                        {"moving", d.scene.moving_object}};
   bool cached = false;
   if (std::ifstream in(scene_dir / "scene_key.json"); in) {
     try {
@@ -69,7 +72,8 @@ void run_demo(DemoCommand& d) {
              gt.intrinsics.height,
              colmap ? "COLMAP (colmap found on PATH; intrinsics given)"
                     : "the ground truth (colmap not used: " +
-                          std::string(d.poses == "gt" ? "--poses-source gt" : "not found on PATH") + ")");
+                          std::string(d.poses == "gt" ? "--poses-source gt" : "not found on PATH") +
+                          ")");
   ProgressBar bar(global_options().quiet);
   o.progress = [&](const RunProgress& p) { bar.update(p); };
   RunResult r = run_pipeline(o);
@@ -100,15 +104,19 @@ void run_demo(DemoCommand& d) {
   auto per_video = row("one scale for the whole video", DepthAlignment::median_video);
   fmt::print("\n| {:<34} | {:>8} | {:>8} |\n", "consistency", "before", "after");
   fmt::print("|{:-<36}|{:->10}|{:->10}|\n", "", "", "");
-  fmt::print("| {:<34} | {:>8.4f} | {:>8.4f} |\n", "geometric loss (flow reprojection)", r.initial_loss,
-             r.final_loss);
-  fmt::print("\n(0 = initial network depth, before test-time training; outputs in {})\n", o.out.string());
+  fmt::print("| {:<34} | {:>8.4f} | {:>8.4f} |\n", "geometric loss (flow reprojection)",
+             r.initial_loss, r.final_loss);
+  fmt::print("\n(0 = initial network depth, before test-time training; outputs in {})\n",
+             o.out.string());
 
   nlohmann::json summary = {
       {"poses", colmap ? "colmap" : "ground truth"},
-      {"abs_rel_median_frame", {{"initial", per_frame.first.mean.abs_rel}, {"final", per_frame.second.mean.abs_rel}}},
-      {"abs_rel_median_video", {{"initial", per_video.first.mean.abs_rel}, {"final", per_video.second.mean.abs_rel}}},
-      {"delta1_median_frame", {{"initial", per_frame.first.mean.delta1}, {"final", per_frame.second.mean.delta1}}},
+      {"abs_rel_median_frame",
+       {{"initial", per_frame.first.mean.abs_rel}, {"final", per_frame.second.mean.abs_rel}}},
+      {"abs_rel_median_video",
+       {{"initial", per_video.first.mean.abs_rel}, {"final", per_video.second.mean.abs_rel}}},
+      {"delta1_median_frame",
+       {{"initial", per_frame.first.mean.delta1}, {"final", per_frame.second.mean.delta1}}},
       {"geometric_loss", {{"initial", r.initial_loss}, {"final", r.final_loss}}},
       {"timings_s", r.run_info["timings_s"]}};
   write_text_file(root / "demo_summary.json", summary.dump(2));
@@ -123,13 +131,16 @@ const CommandRegistration reg(10, [](CLI::App& app) {
   st->o.width = 0.125;
   st->o.depth_long_side = 256;
   st->o.warmup_steps = 100;
-  CLI::App* c = app.add_subcommand("demo", "Run the whole pipeline on the built-in generated scene with ground truth");
+  CLI::App* c = app.add_subcommand(
+      "demo", "Run the whole pipeline on the built-in generated scene with ground truth");
   c->add_option("--out", st->o.out, "Output directory")->capture_default_str();
-  c->add_option("--frames", st->scene.frames, "Frames of the generated scene")->capture_default_str();
+  c->add_option("--frames", st->scene.frames, "Frames of the generated scene")
+      ->capture_default_str();
   c->add_option("--scene-width", st->scene.width, "Scene image width")->capture_default_str();
   c->add_option("--scene-height", st->scene.height, "Scene image height")->capture_default_str();
   c->add_option("--scene-seed", st->scene.seed, "Scene random seed");
-  c->add_option("--poses-source", st->poses, "Where poses come from: auto (COLMAP when installed), colmap, gt")
+  c->add_option("--poses-source", st->poses,
+                "Where poses come from: auto (COLMAP when installed), colmap, gt")
       ->check(CLI::IsMember({"auto", "colmap", "gt"}));
   add_pipeline_flags(c, st->o, st->s);
   c->callback([st] { run_demo(*st); });

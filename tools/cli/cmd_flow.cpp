@@ -5,8 +5,8 @@
 #include <spdlog/spdlog.h>
 
 #include <chrono>
-#include <memory>
 #include <filesystem>
+#include <memory>
 #include <string>
 
 #include "engine/error.h"

@@ -23,11 +23,13 @@ void print_summary(const RunResult& r, const RunOptions& o) {
   for (auto& c : r.cameras) reg += c.registered;
   fmt::print("cvd run: {} frames ({} with poses), {} pairs ({} dropped)\n", r.frame_names.size(),
              reg, r.num_pairs, r.num_pairs_dropped);
-  fmt::print("geometric loss: {:.4f} before training -> {:.4f} after\n", r.initial_loss, r.final_loss);
-  fmt::print("outputs in {}: depth/ depth_initial/ depth_png16/ depth_color/ poses.txt colmap/ "
-             "intrinsics.json sparse_depth.csv{}{} run.json\n",
-             o.out.string(), o.write_point_cloud ? " points.ply" : "",
-             o.write_videos ? " depth.mp4 side_by_side.mp4" : "");
+  fmt::print("geometric loss: {:.4f} before training -> {:.4f} after\n", r.initial_loss,
+             r.final_loss);
+  fmt::print(
+      "outputs in {}: depth/ depth_initial/ depth_png16/ depth_color/ poses.txt colmap/ "
+      "intrinsics.json sparse_depth.csv{}{} run.json\n",
+      o.out.string(), o.write_point_cloud ? " points.ply" : "",
+      o.write_videos ? " depth.mp4 side_by_side.mp4" : "");
 }
 
 // --gt: the run's outputs scored against the ground truth, as `cvd eval --pred OUT --gt GT`
@@ -49,9 +51,11 @@ void evaluate_against_ground_truth(const RunOptions& o) {
 
 const CommandRegistration reg(20, [](CLI::App& app) {
   auto st = std::make_shared<RunCommand>();
-  CLI::App* c = app.add_subcommand("run", "Consistent depth and poses for a video or a folder of frames");
+  CLI::App* c =
+      app.add_subcommand("run", "Consistent depth and poses for a video or a folder of frames");
   c->add_option("input", st->o.input, "Video file or folder of images")->required();
-  c->add_option("-o,--out", st->o.out, "Output directory (a rerun resumes from its cache)")->required();
+  c->add_option("-o,--out", st->o.out, "Output directory (a rerun resumes from its cache)")
+      ->required();
   add_pipeline_flags(c, st->o, st->s);
   c->callback([st] {
     configure_logging();

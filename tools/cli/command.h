@@ -30,13 +30,13 @@ std::vector<RegisteredCommand>& registered_commands();
 // Exit codes of the cvd CLI (documented in the README).
 enum ExitCode : int {
   kExitOk = 0,
-  kExitFailure = 1,         // internal error
-  kExitUsage = 2,           // bad command line
-  kExitBadInput = 3,        // invalid or corrupt input file / argument
-  kExitIo = 4,              // cannot read or write (permissions, disk full)
-  kExitExternal = 5,        // an external tool (COLMAP, ffmpeg) failed
-  kExitNumerical = 6,       // training diverged (non-finite values everywhere)
-  kExitUnsupported = 7,     // the build or input asks for something unsupported
+  kExitFailure = 1,      // internal error
+  kExitUsage = 2,        // bad command line
+  kExitBadInput = 3,     // invalid or corrupt input file / argument
+  kExitIo = 4,           // cannot read or write (permissions, disk full)
+  kExitExternal = 5,     // an external tool (COLMAP, ffmpeg) failed
+  kExitNumerical = 6,    // training diverged (non-finite values everywhere)
+  kExitUnsupported = 7,  // the build or input asks for something unsupported
   kExitCancelled = 130,
 };
 

@@ -28,14 +28,21 @@ CommandRegistration::CommandRegistration(int order, std::function<void(CLI::App&
 static int exit_code_for(ErrorCategory c) {
   switch (c) {
     case ErrorCategory::invalid_argument:
-    case ErrorCategory::format: return kExitBadInput;
-    case ErrorCategory::io: return kExitIo;
-    case ErrorCategory::external: return kExitExternal;
-    case ErrorCategory::numerical: return kExitNumerical;
+    case ErrorCategory::format:
+      return kExitBadInput;
+    case ErrorCategory::io:
+      return kExitIo;
+    case ErrorCategory::external:
+      return kExitExternal;
+    case ErrorCategory::numerical:
+      return kExitNumerical;
     case ErrorCategory::unsupported:
-    case ErrorCategory::device: return kExitUnsupported;
-    case ErrorCategory::cancelled: return kExitCancelled;
-    case ErrorCategory::internal: return kExitFailure;
+    case ErrorCategory::device:
+      return kExitUnsupported;
+    case ErrorCategory::cancelled:
+      return kExitCancelled;
+    case ErrorCategory::internal:
+      return kExitFailure;
   }
   return kExitFailure;
 }

@@ -13,31 +13,45 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s) {
   c->add_option("--max-frames", o.max_frames, "Use at most this many frames (0 = all)");
   c->add_option("--frame-step", o.frame_step, "Use every n-th frame")->check(CLI::PositiveNumber);
   c->add_option("--first-frame", o.first_frame, "Skip frames before this index");
-  c->add_option("--depth-size", o.depth_long_side, "Long side of the depth maps (aligned to the model)");
-  c->add_option("--flow-size", o.flow_long_side, "Long side of the frames used for flow (never upscaled)");
-  c->add_option("--model", o.model, "Converted depth network (.cvdw, see `cvd convert`); default: an untrained network");
+  c->add_option("--depth-size", o.depth_long_side,
+                "Long side of the depth maps (aligned to the model)");
+  c->add_option("--flow-size", o.flow_long_side,
+                "Long side of the frames used for flow (never upscaled)");
+  c->add_option(
+      "--model", o.model,
+      "Converted depth network (.cvdw, see `cvd convert`); default: an untrained network");
   c->add_option("--arch", o.arch, "Architecture of the default network")
       ->check(CLI::IsMember({"mannequin", "midas_small", "midas_v2"}));
   c->add_option("--width", o.width, "Width multiplier of the default network");
   c->add_option("--poses", o.poses_file, "Camera poses file instead of running COLMAP");
-  c->add_option("--poses-format", o.poses_format, "Format of --poses")->check(CLI::IsMember({"tum", "colmap", "kitti"}));
-  c->add_option("--intrinsics", s.intrinsics,
-                 "Camera intrinsics fx,fy,cx,cy at the input resolution (most trusted; without it or "
-                 "--fov: the JPEG EXIF 35 mm focal, else a COLMAP focal search)");
-  c->add_option("--fov", o.fov_deg, "Horizontal field of view in degrees (when fx,fy,cx,cy are unknown)");
-  c->add_option("--matcher", o.matcher, "COLMAP matcher")->check(CLI::IsMember({"sequential", "exhaustive"}));
+  c->add_option("--poses-format", o.poses_format, "Format of --poses")
+      ->check(CLI::IsMember({"tum", "colmap", "kitti"}));
+  c->add_option(
+      "--intrinsics", s.intrinsics,
+      "Camera intrinsics fx,fy,cx,cy at the input resolution (most trusted; without it or "
+      "--fov: the JPEG EXIF 35 mm focal, else a COLMAP focal search)");
+  c->add_option("--fov", o.fov_deg,
+                "Horizontal field of view in degrees (when fx,fy,cx,cy are unknown)");
+  c->add_option("--matcher", o.matcher, "COLMAP matcher")
+      ->check(CLI::IsMember({"sequential", "exhaustive"}));
   c->add_option("--colmap-size", o.colmap_long_side, "Long side of the frames COLMAP sees");
-  c->add_option("--colmap-features", o.colmap_max_features, "Max SIFT features per frame for COLMAP");
-  c->add_option("--masks", o.masks, "Folder of masks (frame name .png, 0 = ignore) passed to COLMAP");
+  c->add_option("--colmap-features", o.colmap_max_features,
+                "Max SIFT features per frame for COLMAP");
+  c->add_option("--masks", o.masks,
+                "Folder of masks (frame name .png, 0 = ignore) passed to COLMAP");
   c->add_option("--flow", o.flow, "Optical flow method")->check(CLI::IsMember({"dis", "flownet2"}));
-  c->add_option("--dis-preset", o.dis_preset, "DIS preset")->check(CLI::IsMember({"ultrafast", "fast", "medium"}));
+  c->add_option("--dis-preset", o.dis_preset, "DIS preset")
+      ->check(CLI::IsMember({"ultrafast", "fast", "medium"}));
   c->add_option("--flow-model", o.flow_model, "FlowNet2 weights (.cvdw) for --flow flownet2");
-  c->add_option("--min-valid", o.min_valid_fraction, "Drop pairs keeping fewer consistent pixels than this fraction");
+  c->add_option("--min-valid", o.min_valid_fraction,
+                "Drop pairs keeping fewer consistent pixels than this fraction");
   c->add_option("--fb-threshold", o.fb_threshold_px, "Forward-backward consistency threshold (px)");
   c->add_option("--epochs", o.epochs, "Training epochs");
-  c->add_option("--batch", o.batch_pairs, "Frame pairs per training step")->check(CLI::PositiveNumber);
+  c->add_option("--batch", o.batch_pairs, "Frame pairs per training step")
+      ->check(CLI::PositiveNumber);
   c->add_option("--lr", o.lr, "Learning rate (default per architecture)");
-  c->add_option("--lambda", o.lambda_disparity, "Weight of the disparity term (default per architecture)");
+  c->add_option("--lambda", o.lambda_disparity,
+                "Weight of the disparity term (default per architecture)");
   c->add_option("--seed", o.seed, "Random seed");
   c->add_option("--warmup", o.warmup_steps, "Sparse-depth warm-up steps of the default network");
   c->add_flag("!--no-videos", o.write_videos, "Do not write depth.mp4 and side_by_side.mp4");
@@ -54,19 +68,23 @@ void apply_flag_strings(const RunFlagStrings& s, RunOptions& o) {
     try {
       v.push_back(std::stod(item));
     } catch (...) {
-      fail(ErrorCategory::invalid_argument, "--intrinsics '{}': '{}' is not a number", s.intrinsics, item);
+      fail(ErrorCategory::invalid_argument, "--intrinsics '{}': '{}' is not a number", s.intrinsics,
+           item);
     }
   }
   if (v.size() != 4)
-    fail(ErrorCategory::invalid_argument, "--intrinsics '{}': expected 4 numbers fx,fy,cx,cy", s.intrinsics);
+    fail(ErrorCategory::invalid_argument, "--intrinsics '{}': expected 4 numbers fx,fy,cx,cy",
+         s.intrinsics);
   if (!(v[0] > 0 && v[1] > 0 && v[2] > 0 && v[3] > 0))
-    fail(ErrorCategory::invalid_argument, "--intrinsics '{}': fx, fy, cx, cy must be positive", s.intrinsics);
+    fail(ErrorCategory::invalid_argument, "--intrinsics '{}': fx, fy, cx, cy must be positive",
+         s.intrinsics);
   o.intrinsics = Intrinsics{v[0], v[1], v[2], v[3], 0, 0};
 }
 
 void configure_logging() {
   const auto& g = global_options();
-  spdlog::set_level(g.quiet ? spdlog::level::warn : (g.verbose ? spdlog::level::debug : spdlog::level::info));
+  spdlog::set_level(g.quiet ? spdlog::level::warn
+                            : (g.verbose ? spdlog::level::debug : spdlog::level::info));
   spdlog::set_pattern("%^[%l]%$ %v");
 }
 

@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <zlib.h>
 #include <algorithm>
 #include <chrono>
 #include <opencv2/imgproc.hpp>
@@ -21,6 +22,7 @@
 #include "pipeline/run_stages.h"
 #include "pipeline/scale_calibration.h"
 #include "pipeline/test_time_training.h"
+#include "pipeline/user_masks.h"
 
 namespace cvd {
 
@@ -165,6 +167,18 @@ std::vector<cv::Mat> infer_depths(DepthNet& net, const std::function<Tensor(int)
   return r;
 }
 
+// Fingerprint of the cameras training sees (a rerun of COLMAP gives other poses).
+uint32_t cameras_crc32(const std::vector<FrameCamera>& cams) {
+  uLong crc = crc32(0L, Z_NULL, 0);
+  for (const auto& c : cams) {
+    double v[17] = {c.intrinsics.fx, c.intrinsics.fy, c.intrinsics.cx, c.intrinsics.cy,
+                    c.pose.t.x(),    c.pose.t.y(),    c.pose.t.z(),    c.registered ? 1.0 : 0.0};
+    for (int k = 0; k < 9; ++k) v[8 + k] = c.pose.R(k / 3, k % 3);
+    crc = crc32(crc, reinterpret_cast<const Bytef*>(v), sizeof v);
+  }
+  return static_cast<uint32_t>(crc);
+}
+
 PairDirection make_direction(const FrameCamera& a, const FrameCamera& b, const cv::Mat& flow,
                              const cv::Mat& mask) {
   PairDirection d;
@@ -191,6 +205,9 @@ RunResult run_pipeline(const RunOptions& o) {
   std::error_code ec;
   if (!fs::exists(o.input, ec))
     fail(ErrorCategory::io, "{}: no such file or directory", o.input.string());
+  if (!o.masks.empty() && !fs::is_directory(o.masks, ec))
+    fail(ErrorCategory::io, "{}: masks folder not found (--masks expects a folder of <frame>.png)",
+         o.masks.string());
   fs::create_directories(o.out, ec);
   if (ec || !fs::is_directory(o.out))
     fail(ErrorCategory::io, "{}: cannot create the output directory ({})", o.out.string(),
@@ -227,6 +244,23 @@ RunResult run_pipeline(const RunOptions& o) {
   t = Clock::now();
   FlowStage flow = run_flow_stage(o, frames, poses, dsize, cache);
   timings["flow"] = since(t);
+  if (!o.masks.empty()) {
+    // User masks (0 = ignore, e.g. moving objects) leave the pixels they cover, and pixels whose
+    // flow lands on them, out of triangulation and out of the geometric loss.
+    int with_masks = 0;
+    std::vector<cv::Mat> usable = load_user_masks(o.masks, frames.names, dsize, &with_masks);
+    long long cleared = 0;
+    for (auto& p : flow.pairs) {
+      const cv::Mat &ui = usable[size_t(p.pair.first)], &uj = usable[size_t(p.pair.second)];
+      cleared += apply_user_masks(p.forward_mask, p.forward, ui, uj);
+      cleared += apply_user_masks(p.backward_mask, p.backward, uj, ui);
+    }
+    info["user_masks"] = {{"folder", o.masks.string()},
+                          {"frames_with_masks", with_masks},
+                          {"flow_pixels_cleared", cleared}};
+    spdlog::info("masks: {} of {} frames have a mask; {} flow pixels left out of the loss",
+                 with_masks, n, cleared);
+  }
 
   // 5. Sparse points: SfM's, or triangulated from flow when poses came from the user.
   std::vector<std::vector<Eigen::Vector3d>> points = poses.points;
@@ -275,11 +309,27 @@ RunResult run_pipeline(const RunOptions& o) {
   to.lambda_disparity = o.lambda_disparity >= 0 ? o.lambda_disparity : default_lambda(net->arch());
   to.seed = o.seed;
   to.checkpoint_dir = cache / "training";
+  to.resume_key = json{{"model", o.model.string()},
+                       {"arch", net->arch()},
+                       {"width", o.width},
+                       {"depth_size", {dsize.width, dsize.height}},
+                       {"lr", to.lr},
+                       {"lambda", to.lambda_disparity},
+                       {"batch_pairs", to.batch_pairs},
+                       {"seed", to.seed},
+                       {"warmup_steps", o.warmup_steps},
+                       {"masks", o.masks.string()},
+                       {"poses", poses.source},
+                       {"flow", o.flow},
+                       {"pairs", pairs.size()},
+                       {"cameras_crc32", cameras_crc32(cams)}}
+                      .dump();
   to.stop_after_epochs = o.stop_after_epochs;
   if (o.cancel) to.cancelled = [c = o.cancel] { return c->load(); };
   to.on_step = [&](int e, int s, int steps, double l) {
     if (o.progress)
-      o.progress({"training", s, steps, fmt::format("epoch {}/{} loss {:.4f}", e, o.epochs, l)});
+      o.progress({"training", (e - 1) * steps + s, o.epochs * steps,
+                  fmt::format("epoch {}/{} loss {:.4f}", e, o.epochs, l)});
   };
   to.on_epoch = [&](int e, double l) {
     spdlog::info("training: epoch {}/{} mean loss {:.4f}", e, o.epochs, l);

@@ -248,7 +248,19 @@ PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::
     co.max_num_features = o.colmap_max_features;
     co.intrinsics = K;
     fs::path model_dir = dir / "result_model";
+    // What the cached model was made from: other settings, masks or frames mean another run.
+    json key = {{"matcher", o.matcher},
+                {"long_side", o.colmap_long_side},
+                {"max_features", o.colmap_max_features},
+                {"masks", o.masks.string()},
+                {"intrinsics", K ? json{K->fx, K->fy, K->cx, K->cy, K->width, K->height} : json()},
+                {"frames", f.names}};
     ColmapModel model;
+    std::error_code ec;
+    if (fs::exists(model_dir / "images.txt") && read_json_if(dir / "cache_key.json") != key) {
+      spdlog::info("poses: the cached COLMAP model was made with other settings; running again");
+      fs::remove_all(model_dir, ec);
+    }
     if (fs::exists(model_dir / "images.txt")) {
       model = read_colmap_text_model(model_dir);
       spdlog::info("poses: cached COLMAP model in {}", model_dir.string());
@@ -298,6 +310,7 @@ PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::
       }
       write_colmap_text_model(model_dir, model);
       write_text_file(dir / "intrinsics_info.json", intrinsics_info.dump(1));
+      write_text_file(dir / "cache_key.json", key.dump(1));
     }
     for (size_t k = 0; k < f.names.size(); ++k) {
       const ColmapImage* im = model.find_image(f.names[k]);

@@ -27,6 +27,7 @@ struct Checkpoint {
   std::string rng_state;
   std::vector<double> losses;
   int skipped = 0;
+  std::string key;
 };
 
 fs::path weights_path(const fs::path& dir, int epoch) {
@@ -44,7 +45,8 @@ void save_checkpoint(const fs::path& dir, DepthNet& net, const Adam& adam, const
   nlohmann::json j = {{"epoch", c.epoch},
                       {"rng_state", c.rng_state},
                       {"epoch_losses", c.losses},
-                      {"skipped_steps", c.skipped}};
+                      {"skipped_steps", c.skipped},
+                      {"key", c.key}};
   write_text_file(dir / "checkpoint.json", j.dump(2));
   for (int e = 0; e < c.epoch; ++e) {
     std::error_code ec;
@@ -64,6 +66,14 @@ bool load_checkpoint(const fs::path& dir, DepthNet& net, Adam& adam, Checkpoint&
     c.rng_state = j.at("rng_state").get<std::string>();
     c.losses = j.at("epoch_losses").get<std::vector<double>>();
     c.skipped = j.at("skipped_steps").get<int>();
+    const std::string stored = j.value("key", std::string());
+    if (stored != c.key) {
+      spdlog::warn(
+          "training: the checkpoint in {} was made with other settings; training starts over",
+          dir.string());
+      c = Checkpoint{0, {}, {}, 0, c.key};
+      return false;
+    }
   } catch (const nlohmann::json::exception& e) {
     fail(ErrorCategory::format, "{}: malformed checkpoint index ({}); delete it to start over",
          index.string(), e.what());
@@ -155,6 +165,7 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
   Generator rng(o.seed);
   TrainingResult result;
   Checkpoint ck;
+  ck.key = o.resume_key;
   if (load_checkpoint(o.checkpoint_dir, net, adam, ck)) {
     rng.set_state(ck.rng_state);
     result.epoch_losses = ck.losses;

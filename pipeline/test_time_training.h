@@ -26,6 +26,10 @@ struct TrainingOptions {
   uint64_t seed = 1;
   // Where checkpoints go (empty: none). A rerun with the same directory resumes.
   std::filesystem::path checkpoint_dir;
+  // What the checkpoint must have been made with (the caller's settings, serialised): a
+  // checkpoint with another key is ignored and training starts over. `epochs` is not part of it,
+  // so a rerun with more epochs continues.
+  std::string resume_key;
   // Progress: (epoch, step, steps per epoch, running mean loss of the epoch).
   std::function<void(int, int, int, double)> on_step;
   // Called after each epoch with (epoch, mean loss).

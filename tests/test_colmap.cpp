@@ -5,6 +5,8 @@
 #include <Eigen/Geometry>
 #include <chrono>
 #include <cmath>
+#include <fstream>
+#include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
 #include "engine/error.h"
@@ -223,6 +225,37 @@ TEST(ColmapRunner, RegistersTwentyKitchenFramesByNameWithTrueIntrinsics) {
   RecordProperty("sim3_scale", std::to_string(sim3_scale));
   RecordProperty("calibrated_scale", std::to_string(cal.scale));
   EXPECT_LT(rigid_ate, 0.04) << "calibrated trajectory vs GT after a rigid alignment, metres";
+}
+
+// `cvd run` reuses its cached COLMAP model only when it was made from the same frames and
+// settings: another feature budget (or masks, intrinsics, matcher) runs COLMAP again.
+TEST(ColmapRunner, CachedModelIsReusedOnlyWithTheSameSettings) {
+  CVD_REQUIRE_COLMAP();
+  test::TempDir dir;
+  const fs::path scene = dir.path() / "scene";
+  test::CommandResult r =
+      test::run_cvd("scene --out '" + scene.string() + "' --frames 8 --width 256 --height 160");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  std::ifstream kf(scene / "intrinsics.json");
+  auto k = nlohmann::json::parse(kf);
+  const std::string args =
+      "run '" + (scene / "rgb").string() + "' -o '" + (dir.path() / "out").string() +
+      "' --epochs 1 --warmup 1 --width 0.0625 --depth-size 64 --no-videos --no-ply "
+      "--intrinsics " +
+      fmt::format("{:.17g},{:.17g},{:.17g},{:.17g}", k["fx"].get<double>(), k["fy"].get<double>(),
+                  k["cx"].get<double>(), k["cy"].get<double>());
+  r = test::run_cvd(args + " --colmap-features 1024");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = test::run_cvd(args + " --colmap-features 1024");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("poses: cached COLMAP model"), std::string::npos) << r.output;
+  r = test::run_cvd(args + " --colmap-features 1500");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("made with other settings; running again"), std::string::npos)
+      << r.output;
+  EXPECT_EQ(r.output.find("poses: cached COLMAP model"), std::string::npos) << r.output;
+  // New poses: the training checkpoint of the earlier poses is not resumed.
+  EXPECT_NE(r.output.find("training starts over"), std::string::npos) << r.output;
 }
 
 }  // namespace

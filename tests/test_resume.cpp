@@ -5,6 +5,7 @@
 //  * a run killed with SIGKILL during the flow stage (a larger 10-frame 640x480 clip, so the
 //    stage lasts seconds), then rerun, keeps the flow pairs already done and writes the same flow
 //    and depth as an uninterrupted run;
+//  * a rerun with other training settings ignores the checkpoint, one with more epochs continues;
 //  * NaN losses injected with CVD_FAULT_NAN_LOSS_STEPS are skipped and counted in run.json, and a
 //    run whose every loss is NaN ends with exit code 6 and a clear message.
 #include <gtest/gtest.h>
@@ -162,6 +163,22 @@ TEST_F(TinyClip, KilledDuringTrainingResumesToTheSameDepth) {
   EXPECT_EQ(files, 6);
   EXPECT_LE(worst, 1e-5) << "largest relative depth difference resumed vs uninterrupted";
   std::printf("[resume] %d depth maps, largest relative difference %.3g\n", files, worst);
+}
+
+TEST_F(TinyClip, ARerunWithOtherTrainingSettingsStartsOverAndMoreEpochsContinue) {
+  fs::path out = work() / "settings";
+  CommandResult r = run_cvd(run_args(out, 1));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  // Another learning rate: the epoch-1 checkpoint does not belong to this run.
+  r = run_cvd(run_args(out, 1) + " --lr 1e-3");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("made with other settings"), std::string::npos) << r.output;
+  EXPECT_EQ(read_json(out / "run.json")["training"]["resumed_from_epoch"], 0);
+  // Same settings, one more epoch: continues from the checkpoint.
+  r = run_cvd(run_args(out, 2) + " --lr 1e-3");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_EQ(r.output.find("made with other settings"), std::string::npos) << r.output;
+  EXPECT_EQ(read_json(out / "run.json")["training"]["resumed_from_epoch"], 1);
 }
 
 // Flow pairs finished in `out`: each pair's .json is written last (atomically).

@@ -23,12 +23,15 @@ void ProgressBar::update(const RunProgress& p) {
     stage_ = p.stage;
     stage_start_ = now;
     last_percent_ = -1;
+    // A resumed stage starts part-way: the rate counts only the steps done since.
+    first_done_ = p.done > 0 ? p.done - 1 : 0;
   }
   double elapsed = std::chrono::duration<double>(now - stage_start_).count();
   std::string line;
   if (p.total > 0) {
     int percent = static_cast<int>(100.0 * p.done / p.total);
-    double eta = p.done > 0 ? elapsed * (p.total - p.done) / p.done : 0;
+    const long long since = static_cast<long long>(p.done) - first_done_;
+    double eta = since > 0 ? elapsed * (p.total - p.done) / static_cast<double>(since) : 0;
     int filled = percent * 24 / 100;
     line = fmt::format("{:>14} [{}{}] {}/{} {:3d}% {:.0f}s eta {:.0f}s {}", p.stage,
                        std::string(filled, '#'), std::string(24 - filled, '.'), p.done, p.total,

@@ -19,6 +19,7 @@ class ProgressBar {
   bool quiet_, tty_;
   std::string stage_;
   std::chrono::steady_clock::time_point stage_start_, last_draw_;
+  long long first_done_ = 0;
   int last_percent_ = -1;
 };
 

@@ -38,7 +38,8 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s) {
   c->add_option("--colmap-features", o.colmap_max_features,
                 "Max SIFT features per frame for COLMAP");
   c->add_option("--masks", o.masks,
-                "Folder of masks (frame name .png, 0 = ignore) passed to COLMAP");
+                "Folder of masks of regions to ignore, e.g. moving objects (<frame name>.png, 0 = "
+                "ignore): passed to COLMAP and left out of the flow pairs and the geometric loss");
   c->add_option("--flow", o.flow, "Optical flow method")->check(CLI::IsMember({"dis", "flownet2"}));
   c->add_option("--dis-preset", o.dis_preset, "DIS preset")
       ->check(CLI::IsMember({"ultrafast", "fast", "medium"}));

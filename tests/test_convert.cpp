@@ -21,6 +21,7 @@
 #include "pipeline/image_io.h"
 #include "pipeline/pfm_io.h"
 #include "pipeline/run_stages.h"
+#include "tests/onnx_anonymize.h"
 #include "tests/test_support.h"
 
 namespace cvd {
@@ -118,22 +119,7 @@ TEST_P(ConvertParity, MatchesPyTorchOutputs) {
 TEST_P(ConvertParity, AnonymousInitializersMatchByStructure) {
   REQUIRE_FIXTURE(f, GetParam());
   OnnxModel model = read_onnx(f->onnx);
-  std::vector<size_t> order(model.graph.initializers.size());
-  for (size_t i = 0; i < order.size(); ++i) order[i] = i;
-  std::shuffle(order.begin(), order.end(), std::mt19937(7));
-  std::map<std::string, std::string> rename;
-  std::vector<OnnxTensor> shuffled;
-  for (size_t k = 0; k < order.size(); ++k) {
-    OnnxTensor t = model.graph.initializers[order[k]];
-    rename[t.name] = "w" + std::to_string(k);
-    t.name = rename[t.name];
-    shuffled.push_back(std::move(t));
-  }
-  model.graph.initializers = std::move(shuffled);
-  model.graph.reindex();
-  for (auto& n : model.graph.nodes)
-    for (auto& in : n.inputs)
-      if (rename.count(in)) in = rename[in];
+  test::anonymize_initializers(model, 7);
 
   Generator gen(3);
   auto anon = create_depth_net(GetParam(), f->width, gen);

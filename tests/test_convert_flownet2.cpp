@@ -26,6 +26,7 @@
 #include "engine/ops.h"
 #include "models/onnx_flownet2.h"
 #include "pipeline/flow_io.h"
+#include "tests/onnx_anonymize.h"
 #include "tests/test_support.h"
 
 namespace cvd {
@@ -169,22 +170,7 @@ INSTANTIATE_TEST_SUITE_P(DTypes, ConvertFlowNet2Parity, ::testing::Values(DType:
 // to the same tensors.
 TEST(ConvertFlowNet2, AnonymousInitializersMatchByStructure) {
   OnnxModel model = read_onnx(onnx_file());
-  std::vector<size_t> order(model.graph.initializers.size());
-  for (size_t i = 0; i < order.size(); ++i) order[i] = i;
-  std::shuffle(order.begin(), order.end(), std::mt19937(11));
-  std::map<std::string, std::string> rename;
-  std::vector<OnnxTensor> shuffled;
-  for (size_t k = 0; k < order.size(); ++k) {
-    OnnxTensor t = model.graph.initializers[order[k]];
-    rename[t.name] = "w" + std::to_string(k);
-    t.name = rename[t.name];
-    shuffled.push_back(std::move(t));
-  }
-  model.graph.initializers = std::move(shuffled);
-  model.graph.reindex();
-  for (auto& n : model.graph.nodes)
-    for (auto& in : n.inputs)
-      if (rename.count(in)) in = rename[in];
+  test::anonymize_initializers(model, 11);
 
   Generator gen(3);
   FlowNet2 anon(kWidth, gen);

@@ -14,6 +14,7 @@
 #include "engine/error.h"
 #include "pipeline/atomic_file.h"
 #include "pipeline/colmap_runner.h"
+#include "pipeline/container_focal.h"
 #include "pipeline/exif_focal.h"
 #include "pipeline/flow_dis.h"
 #include "pipeline/flow_flownet2.h"
@@ -138,13 +139,20 @@ std::optional<Intrinsics> user_intrinsics(const RunOptions& o, const FramesStage
   return std::nullopt;
 }
 
-// The 35 mm equivalent focal written by the camera into the first JPEG of an image folder (video
-// containers carry no focal length that cvd can read). Intrinsics at the cached frames' size with
-// the principal point at the centre, or nullopt.
-std::optional<Intrinsics> exif_intrinsics(const RunOptions& o, const FramesStage& f,
-                                          double* focal_35mm) {
+// Where a camera-written focal came from: "exif" (first JPEG of an image folder) or
+// "container" (the video file's metadata), the file and tag, and the 35 mm equivalent value.
+struct MetadataFocal {
+  std::string kind, file, tag;
+  double focal_35mm = 0;
+};
+
+std::optional<MetadataFocal> find_metadata_focal(const RunOptions& o) {
   std::error_code ec;
-  if (!fs::is_directory(o.input, ec)) return std::nullopt;
+  if (!fs::is_directory(o.input, ec)) {
+    std::optional<ContainerFocal> c = read_container_focal_35mm(o.input);
+    if (!c) return std::nullopt;
+    return MetadataFocal{"container", o.input.string(), c->key, c->focal_35mm};
+  }
   std::vector<fs::path> jpegs;
   for (const auto& e : fs::directory_iterator(o.input, ec)) {
     std::string ext = e.path().extension().string();
@@ -155,18 +163,29 @@ std::optional<Intrinsics> exif_intrinsics(const RunOptions& o, const FramesStage
   std::sort(jpegs.begin(), jpegs.end());
   std::optional<double> f35 = read_exif_focal_35mm(jpegs.front());
   if (!f35) return std::nullopt;
-  *focal_35mm = *f35;
+  return MetadataFocal{"exif", jpegs.front().string(), "FocalLengthIn35mmFilm", *f35};
+}
+
+// The 35 mm equivalent focal written by the camera: EXIF of the first JPEG of an image folder,
+// or the video container's metadata (pipeline/container_focal.h). Intrinsics at the cached
+// frames' size with the principal point at the centre, or nullopt.
+std::optional<Intrinsics> metadata_intrinsics(const RunOptions& o, const FramesStage& f,
+                                              MetadataFocal* found) {
+  std::optional<MetadataFocal> m = find_metadata_focal(o);
+  if (!m) return std::nullopt;
   // The equivalence is on the image diagonal of the input frames; scale to the cached frames.
-  double fx = focal_px_from_35mm(*f35, f.input_width, f.input_height) * f.width / f.input_width;
+  double fx =
+      focal_px_from_35mm(m->focal_35mm, f.input_width, f.input_height) * f.width / f.input_width;
   Intrinsics k{fx, fx, 0.5 * f.width - 0.5, 0.5 * f.height - 0.5, f.width, f.height};
   std::string w = implausible_focal_warning(fx, f.width, f.height);
   if (!w.empty()) {
-    spdlog::warn("poses: EXIF FocalLengthIn35mmFilm {} mm of {} ignored: {}", *f35,
-                 jpegs.front().string(), w);
+    spdlog::warn("poses: {} {} mm of {} ignored: {}", m->tag, m->focal_35mm, m->file, w);
     return std::nullopt;
   }
-  spdlog::info("poses: focal from EXIF of {}: {} mm (35 mm equivalent) = {:.1f} px",
-               jpegs.front().string(), *f35, fx);
+  spdlog::info("poses: focal from the {} of {}: {} = {} mm (35 mm equivalent) = {:.1f} px",
+               m->kind == "exif" ? "EXIF" : "container metadata", m->file, m->tag, m->focal_35mm,
+               fx);
+  *found = *m;
   return k;
 }
 
@@ -215,7 +234,7 @@ PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::
   PosesStage st;
   st.cameras.resize(f.names.size());
   st.points.resize(f.names.size());
-  // Intrinsics in order of trust: the user's, the camera's EXIF focal, else estimated by the
+  // Intrinsics in order of trust: the user's, the camera's EXIF / container focal, else estimated by the
   // COLMAP focal search (pipeline/intrinsics_focal_search.h).
   std::optional<Intrinsics> K = user_intrinsics(o, f);
   json intrinsics_info;
@@ -223,11 +242,13 @@ PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::
     st.intrinsics_source = o.intrinsics ? "user (--intrinsics)" : "user (--fov)";
     intrinsics_info = {{"source", o.intrinsics ? "user_intrinsics" : "user_fov"}};
   } else {
-    double f35 = 0;
-    K = exif_intrinsics(o, f, &f35);
+    MetadataFocal mf;
+    K = metadata_intrinsics(o, f, &mf);
     if (K) {
-      st.intrinsics_source = fmt::format("EXIF FocalLengthIn35mmFilm {} mm", f35);
-      intrinsics_info = {{"source", "exif"}, {"focal_35mm", f35}};
+      st.intrinsics_source = fmt::format("{} {} {} mm", mf.kind == "exif" ? "EXIF" : "container",
+                                         mf.tag, mf.focal_35mm);
+      intrinsics_info = {
+          {"source", mf.kind}, {"focal_35mm", mf.focal_35mm}, {"file", mf.file}, {"tag", mf.tag}};
     } else {
       st.intrinsics_source = "estimated (COLMAP focal search)";
       intrinsics_info = {{"source", "estimated"}};

@@ -11,7 +11,7 @@ pkgs=(
   build-essential cmake ninja-build pkg-config ccache git
   libeigen3-dev libopencv-dev libopencv-contrib-dev libceres-dev colmap
   libdnnl-dev ocl-icd-opencl-dev libgtest-dev libgmock-dev libbenchmark-dev
-  ffmpeg libcli11-dev nlohmann-json3-dev libspdlog-dev libfmt-dev
+  ffmpeg libavformat-dev libavutil-dev libcli11-dev nlohmann-json3-dev libspdlog-dev libfmt-dev
   libonnx-dev libprotobuf-dev protobuf-compiler zlib1g-dev doxygen clang chromium jq
   # libFuzzer and clang's sanitizer runtimes (only recommended by clang, so not pulled in by
   # --no-install-recommends): tests/fuzz/run_fuzzers.sh links -fsanitize=fuzzer against them.

@@ -63,6 +63,9 @@ inline CommandResult run_command(const std::string& cmd) {
   return r;
 }
 
+// `p` in single quotes, for a shell command line.
+inline std::string shell_quoted(const std::filesystem::path& p) { return "'" + p.string() + "'"; }
+
 // Runs the cvd CLI with the given argument string.
 inline CommandResult run_cvd(const std::string& args) {
   return run_command(cli_path() + " " + args);

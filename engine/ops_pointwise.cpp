@@ -1,5 +1,6 @@
 // Element-wise ops: unary (with scalar parameters), broadcasting binaries, comparisons, where.
 #include "engine/op_support.h"
+#include "kernels/elementwise_math.h"
 
 namespace cvd {
 
@@ -45,10 +46,15 @@ Tensor unary(const Tensor& x_in, const UnaryParams& p) {
   Tensor y = empty_like_kind(x.shape(), x);
   dispatch(OpId::unary, x, KernelArgs{{x}, {y}, &p});
   if (!any_requires_grad({x})) return y;
+  // Save only what the op's derivative reads (kernels/elementwise_math.h): relu-like ops and
+  // sigmoid / tanh / exp / sqrt / reciprocal read the output, so an activation's input (e.g. a
+  // batch norm's output) is not kept alive for backward; scalar ops read neither.
+  const UnaryOperands reads = unary_backward_reads(p.op);
   return record(unary_name(p.op), y, {x},
-                [xs = x.detach(), ys = y.detach(), p](const Tensor& g, const std::vector<bool>&) {
+                [xs = reads.x ? x.detach() : Tensor(), ys = reads.y ? y.detach() : Tensor(),
+                 shape = x.shape(), p](const Tensor& g, const std::vector<bool>&) {
                   Tensor gc = g.contiguous();
-                  Tensor gx = empty_like_kind(xs.shape(), xs);
+                  Tensor gx = empty_like_kind(shape, gc);
                   dispatch(OpId::unary_backward, gc, KernelArgs{{gc, xs, ys}, {gx}, &p});
                   return std::vector<Tensor>{gx};
                 });
@@ -98,9 +104,13 @@ static Tensor binary(const Tensor& a, const Tensor& b, BinaryOp op, const char* 
   Shape out = broadcast_shapes(a.shape(), b.shape());
   Tensor c = binary_raw(a, b, op, out);
   if (!any_requires_grad({a, b})) return c;
+  // add and sub need only the shapes: keeping their inputs alive until backward would hold
+  // activations (e.g. both branches of a residual sum) that nothing else needs.
+  const bool save_inputs = op != BinaryOp::add && op != BinaryOp::sub;
   return record(
       name, c, {a, b},
-      [as = a.detach(), bs = b.detach(), op](const Tensor& g, const std::vector<bool>& need) {
+      [as = save_inputs ? a.detach() : Tensor(), bs = save_inputs ? b.detach() : Tensor(),
+       sa = a.shape(), sb = b.shape(), op](const Tensor& g, const std::vector<bool>& need) {
         Tensor ga, gb;
         switch (op) {
           case BinaryOp::add:
@@ -132,11 +142,11 @@ static Tensor binary(const Tensor& a, const Tensor& b, BinaryOp op, const char* 
             break;
         }
         if (ga.defined() && need[0])
-          ga = sum_to(ga, as.shape());
+          ga = sum_to(ga, sa);
         else
           ga = Tensor();
         if (gb.defined() && need[1])
-          gb = sum_to(gb, bs.shape());
+          gb = sum_to(gb, sb);
         else
           gb = Tensor();
         return std::vector<Tensor>{ga, gb};

@@ -49,15 +49,45 @@ CVD_HOST_DEVICE T unary_forward(UnaryOp op, T x, T a, T b) {
   return x;
 }
 
-// d(unary)/dx times gy, from the input x and the output y.
+// Which operands unary_backward reads for `op`: the input x, the output y, or neither (callers
+// may then pass any tensor of the right shape, e.g. gy, in place of the other). relu and clip
+// read y: y > 0 exactly where x > 0, and a < y < b exactly where a < x < b.
+struct UnaryOperands {
+  bool x = false, y = false;
+};
+CVD_HOST_DEVICE UnaryOperands unary_backward_reads(UnaryOp op) {
+  switch (op) {
+    case UnaryOp::leaky_relu:
+    case UnaryOp::log:
+    case UnaryOp::abs:
+    case UnaryOp::pow_scalar:
+      return {true, false};
+    case UnaryOp::relu:
+    case UnaryOp::clip:
+    case UnaryOp::sigmoid:
+    case UnaryOp::tanh:
+    case UnaryOp::exp:
+    case UnaryOp::sqrt:
+    case UnaryOp::reciprocal:
+      return {false, true};
+    case UnaryOp::neg:
+    case UnaryOp::mul_scalar:
+    case UnaryOp::add_scalar:
+      return {false, false};
+  }
+  return {true, true};
+}
+
+// d(unary)/dx times gy, from the input x and the output y (only those unary_backward_reads
+// names are read).
 template <class T>
 CVD_HOST_DEVICE T unary_backward(UnaryOp op, T gy, T x, T y, T a, T b) {
   using std::pow;
   switch (op) {
     case UnaryOp::relu:
-      return x > T(0) ? gy : T(0);
+      return y > T(0) ? gy : T(0);
     case UnaryOp::clip:
-      return (x > a && x < b) ? gy : T(0);
+      return (y > a && y < b) ? gy : T(0);
     case UnaryOp::leaky_relu:
       return x > T(0) ? gy : a * gy;
     case UnaryOp::sigmoid:

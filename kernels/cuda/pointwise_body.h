@@ -133,10 +133,13 @@ void unary_op(const KernelArgs& a) {
 template <class Launch>
 void unary_backward_op(const KernelArgs& a) {
   const UnaryParams& p = a.p<UnaryParams>();
+  // x or y may be undefined when the op does not read it (unary_backward_reads); gy stands in.
+  const Tensor& x = a.in[1].defined() ? a.in[1] : a.in[0];
+  const Tensor& y = a.in[2].defined() ? a.in[2] : a.in[0];
   Launch::launch(a.out[0].numel(),
-                 UnaryBackwardBody<float>{a.in[0].data<float>(), a.in[1].data<float>(),
-                                          a.in[2].data<float>(), a.out[0].data<float>(), p.op,
-                                          static_cast<float>(p.a), static_cast<float>(p.b)});
+                 UnaryBackwardBody<float>{a.in[0].data<float>(), x.data<float>(), y.data<float>(),
+                                          a.out[0].data<float>(), p.op, static_cast<float>(p.a),
+                                          static_cast<float>(p.b)});
 }
 
 template <class Launch>

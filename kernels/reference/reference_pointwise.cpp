@@ -23,8 +23,9 @@ void unary(const KernelArgs& a) {
 void unary_backward(const KernelArgs& a) {
   CVD_ASSERT(a.in.size() == 3 && a.out.size() == 1 && a.params != nullptr);
   const Tensor& gy = a.in[0];
-  const Tensor& x = a.in[1];
-  const Tensor& y = a.in[2];
+  // x or y may be undefined when the op does not read it (unary_backward_reads); gy stands in.
+  const Tensor& x = a.in[1].defined() ? a.in[1] : gy;
+  const Tensor& y = a.in[2].defined() ? a.in[2] : gy;
   const Tensor& gx = a.out[0];
   CVD_ASSERT(is_f64_contiguous(gy) && is_f64_contiguous(x) && is_f64_contiguous(y));
   CVD_ASSERT(is_f64_contiguous(gx));

@@ -42,6 +42,7 @@ RunOptions to_run_options(const PipelineOptions& p) {
   o.lambda_disparity = p.lambda_disparity;
   o.seed = p.seed;
   o.warmup_steps = p.warmup_steps;
+  o.precision = p.precision;
   o.write_videos = p.write_videos;
   o.write_point_cloud = p.write_point_cloud;
   o.gt = p.gt;

@@ -59,6 +59,9 @@ struct RunOptions {
   double lambda_disparity = -1;
   uint64_t seed = 1;
   int warmup_steps = 200;  // default network only: fit sparse SfM depth first
+  // Arithmetic of the CPU convolutions during the whole run: "f32" or "bf16" (AMX /
+  // AVX512-BF16; engine/compute_precision.h). Weights, optimizer state and outputs stay f32.
+  std::string precision = "f32";
 
   // Outputs
   bool write_videos = true;

@@ -10,6 +10,7 @@
 #include "engine/adam.h"
 #include "engine/autograd.h"
 #include "engine/backend_info.h"
+#include "engine/compute_precision.h"
 #include "engine/cvdw.h"
 #include "engine/module_weights.h"
 #include "engine/ops.h"
@@ -201,6 +202,9 @@ RunResult run_pipeline(const RunOptions& o) {
   auto t_all = Clock::now();
   CVD_CHECK(!o.input.empty(), "no input video or folder given");
   CVD_CHECK(!o.out.empty(), "no output directory given");
+  // Before anything is created: an unknown precision or bf16 without CPU support is an error.
+  const ComputePrecision precision = parse_precision(o.precision);
+  ScopedComputePrecision precision_scope(precision);
   // Check the input before creating anything, so a typo leaves no output folder behind.
   std::error_code ec;
   if (!fs::exists(o.input, ec))
@@ -321,6 +325,7 @@ RunResult run_pipeline(const RunOptions& o) {
                        {"masks", o.masks.string()},
                        {"poses", poses.source},
                        {"flow", o.flow},
+                       {"precision", precision_name(precision)},
                        {"pairs", pairs.size()},
                        {"cameras_crc32", cameras_crc32(cams)}}
                       .dump();
@@ -418,6 +423,9 @@ RunResult run_pipeline(const RunOptions& o) {
                       {"lr", to.lr},
                       {"lambda", to.lambda_disparity},
                       {"seed", o.seed},
+                      {"precision", precision_name(precision)},
+                      {"precision_unit",
+                       precision == ComputePrecision::bf16 ? bf16_unit() : std::string("f32 FMA")},
                       {"epoch_losses", tr.epoch_losses},
                       {"skipped_steps", tr.skipped_steps},
                       {"resumed_from_epoch", tr.resumed_from_epoch},

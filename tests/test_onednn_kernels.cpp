@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "engine/compute_precision.h"
 #include "engine/dispatch.h"
 #include "engine/random.h"
 #include "engine/tensor.h"
@@ -178,7 +179,9 @@ const std::vector<ConvCase>& conv_cases() {
   return cases;
 }
 
-void check_conv_case(const ConvCase& cc) {
+// `bf16_tol`: 0 checks f32 results at f32 tolerances; > 0 is the tolerance (relative to the
+// largest reference value) of every pass in bf16 mode, whose inputs are rounded to 8 bits.
+void check_conv_case(const ConvCase& cc, double bf16_tol = 0) {
   SCOPED_TRACE(cc.name);
   Generator gen(17);
   const Conv2dParams& p = cc.p;
@@ -191,13 +194,13 @@ void check_conv_case(const ConvCase& cc) {
 
   Pair y = outputs(ys);
   run_both(OpId::conv2d, {x, w, b}, {y}, &p);
-  expect_close(y, 1e-4, "conv2d forward");
+  expect_close(y, bf16_tol > 0 ? bf16_tol : 1e-4, "conv2d forward");
 
   Pair gx = outputs(xs);
   run_both(OpId::conv2d_backward_data, {gy, w}, {gx}, &p);
-  expect_close(gx, 1e-4, "conv2d backward data");
+  expect_close(gx, bf16_tol > 0 ? bf16_tol : 1e-4, "conv2d backward data");
 
-  const double tol = sum_tolerance(cc.n * oh * ow);
+  const double tol = bf16_tol > 0 ? bf16_tol : sum_tolerance(cc.n * oh * ow);
   for (bool with_gb : {true, false}) {
     Pair gw = outputs(ws), gb = with_gb ? outputs({cc.o}) : none();
     run_both(OpId::conv2d_backward_weight, {gy, x}, {gw, gb}, &p);
@@ -253,6 +256,40 @@ TEST(OnednnConv, MatchesReferenceWithNchwActivations) {
   for (const ConvCase& cc : conv_cases()) check_conv_case(cc);
 }
 
+// bf16 mode (engine/compute_precision.h) on a CPU with AMX or AVX512-BF16: every case again,
+// the convolutions of 16+ channels a side now computed from bf16-rounded inputs. Tolerance 8e-3
+// of the largest value: bf16 rounds each input to 2^-9 relative, so each product is off by up to
+// 2^-8 and the sum of K products by about 2^-9 sqrt(K) of its magnitude, while the largest output
+// is several times that magnitude.
+struct PrecisionOverride {
+  explicit PrecisionOverride(ComputePrecision p) { set_compute_precision(p); }
+  ~PrecisionOverride() { set_compute_precision(ComputePrecision::f32); }
+};
+
+TEST(OnednnConv, Bf16MatchesReferenceWithinBf16Rounding) {
+  std::string why;
+  if (!bf16_supported(&why)) GTEST_SKIP() << "no native bf16 on this CPU: " << why;
+  PrecisionOverride bf16(ComputePrecision::bf16);
+  for (const ConvCase& cc : conv_cases()) check_conv_case(cc, 8e-3);
+  // Shapes of the depth networks' wide layers (Mannequin's inception branches), in one chunk and
+  // image by image.
+  const std::vector<ConvCase> wide = {
+      {"3x3 64->16 p1", 2, 64, 56, 96, 16, 3, 3, conv_params(1, 1, 1, 1, 1), true},
+      {"3x3 64->16 p1 one wide image", 1, 64, 40, 160, 16, 3, 3, conv_params(1, 1, 1, 1, 1), true},
+      {"7x7 64->16 p3", 2, 64, 28, 48, 16, 7, 7, conv_params(1, 3, 3, 3, 3), true},
+      {"1x1 128->64", 2, 128, 28, 48, 64, 1, 1, conv_params(1, 0, 0, 0, 0), true},
+      {"3x3 s2 32->48", 3, 32, 17, 23, 48, 3, 3, conv_params(2, 1, 1, 1, 1), false},
+      // At and past kBf16BackwardWeightsMaxWidth (256): past it, backward weights runs in f32
+      // (oneDNN 2.6's AMX kernel corrupts the heap on such rows); both must be right.
+      {"3x3 64->16 p1 256 wide", 1, 64, 6, 256, 16, 3, 3, conv_params(1, 1, 1, 1, 1), true},
+      {"3x3 64->16 p1 384 wide", 2, 64, 6, 384, 16, 3, 3, conv_params(1, 1, 1, 1, 1), true},
+      {"1x1 128->64 384 wide", 1, 128, 4, 384, 64, 1, 1, conv_params(1, 0, 0, 0, 0), true},
+  };
+  for (const ConvCase& cc : wide) check_conv_case(cc, 8e-3);
+  PlanOverride chunks(static_cast<int>(onednn::ActivationLayout::preferred), 1, 0);
+  for (const ConvCase& cc : wide) check_conv_case(cc, 8e-3);
+}
+
 // ---- Transposed convolution ------------------------------------------------------------------
 
 struct DeconvCase {
@@ -292,7 +329,8 @@ const std::vector<DeconvCase>& deconv_cases() {
   return cases;
 }
 
-void check_deconv_case(const DeconvCase& dc) {
+// `bf16_tol` as for check_conv_case.
+void check_deconv_case(const DeconvCase& dc, double bf16_tol = 0) {
   SCOPED_TRACE(dc.name);
   Generator gen(23);
   const ConvTranspose2dParams& p = dc.p;
@@ -307,13 +345,13 @@ void check_deconv_case(const DeconvCase& dc) {
 
   Pair y = outputs(ys);
   run_both(OpId::conv_transpose2d, {x, w, b}, {y}, &p);
-  expect_close(y, 1e-4, "conv_transpose2d forward");
+  expect_close(y, bf16_tol > 0 ? bf16_tol : 1e-4, "conv_transpose2d forward");
 
   Pair gx = outputs(xs);
   run_both(OpId::conv_transpose2d_backward_data, {gy, w}, {gx}, &p);
-  expect_close(gx, 1e-4, "conv_transpose2d backward data");
+  expect_close(gx, bf16_tol > 0 ? bf16_tol : 1e-4, "conv_transpose2d backward data");
 
-  const double tol = sum_tolerance(dc.n * oh * ow);
+  const double tol = bf16_tol > 0 ? bf16_tol : sum_tolerance(dc.n * oh * ow);
   for (bool with_gb : {true, false}) {
     Pair gw = outputs(ws), gb = with_gb ? outputs({dc.o}) : none();
     run_both(OpId::conv_transpose2d_backward_weight, {gy, x}, {gw, gb}, &p);
@@ -329,6 +367,21 @@ TEST(OnednnDeconv, MatchesReferenceAllCases) {
 TEST(OnednnDeconv, MatchesReferenceBatchSplitIntoChunks) {
   PlanOverride o(static_cast<int>(onednn::ActivationLayout::preferred), 1);
   for (const DeconvCase& dc : deconv_cases()) check_deconv_case(dc);
+}
+
+TEST(OnednnDeconv, Bf16MatchesReferenceWithinBf16Rounding) {
+  std::string why;
+  if (!bf16_supported(&why)) GTEST_SKIP() << "no native bf16 on this CPU: " << why;
+  PrecisionOverride bf16(ComputePrecision::bf16);
+  for (const DeconvCase& dc : deconv_cases()) check_deconv_case(dc, 8e-3);
+  // 16+ channels a side (so bf16 really runs), FlowNet2's upconvolution shape, and an output
+  // wider than kBf16BackwardWeightsMaxWidth (backward weights then in f32).
+  const std::vector<DeconvCase> wide = {
+      {"k4 s2 p1 64->32", 2, 64, 12, 16, 32, 4, 4, deconv_params(2, 1, 1, 1, 1, 0, 0), true},
+      {"k4 s2 p1 32->16 to 320 wide", 1, 32, 3, 160, 16, 4, 4, deconv_params(2, 1, 1, 1, 1, 0, 0),
+       true},
+  };
+  for (const DeconvCase& dc : wide) check_deconv_case(dc, 8e-3);
 }
 
 // ---- Batch norm ------------------------------------------------------------------------------

@@ -68,6 +68,10 @@ struct PipelineOptions {
   double lambda_disparity = -1;  ///< --lambda
   std::uint64_t seed = 1;        ///< --seed
   int warmup_steps = 200;        ///< --warmup
+  /// --precision: "f32" or "bf16" (CPU convolutions on AMX / AVX512-BF16 with f32 accumulation;
+  /// weights, optimizer state and outputs stay f32). bf16 on a CPU without native bf16 throws
+  /// Error(ErrorCategory::unsupported).
+  std::string precision = "f32";
 
   // Outputs
   bool write_videos = true;       ///< !--no-videos

@@ -6,6 +6,7 @@
 #include <atomic>
 #include <cstdlib>
 
+#include "engine/compute_precision.h"
 #include "engine/error.h"
 
 namespace cvd::onednn {
@@ -144,3 +145,26 @@ void fail_onednn(OpId op, const dnnl::error& e) {
 int onednn_threads() { return omp_in_parallel() ? 1 : omp_get_max_threads(); }
 
 }  // namespace cvd::onednn
+
+namespace cvd {
+
+// engine/compute_precision.h: bf16 support is what oneDNN's effective ISA offers.
+std::string bf16_unit() {
+  const dnnl::cpu_isa isa = dnnl::get_effective_cpu_isa();
+  if (isa == dnnl::cpu_isa::avx512_core_amx) return "AMX";
+  if (isa == dnnl::cpu_isa::avx512_core_bf16) return "AVX512-BF16";
+  return "none";
+}
+
+bool bf16_supported(std::string* why) {
+  const std::string unit = bf16_unit();
+  if (unit != "none") return true;
+  if (why) {
+    *why = fmt::format(
+        "oneDNN's effective CPU ISA (code {}) has neither (ONEDNN_MAX_CPU_ISA may also limit it)",
+        static_cast<int>(dnnl::get_effective_cpu_isa()));
+  }
+  return false;
+}
+
+}  // namespace cvd

@@ -5,6 +5,7 @@
 #include <cstring>
 
 #include "engine/error.h"
+#include "kernels/cpu/cpu_parallel.h"
 #include "kernels/cpu/depthwise_conv2d.h"
 #include "kernels/cpu/onednn_conv_family.h"
 #include "kernels/cpu/onednn_kernels.h"
@@ -43,6 +44,7 @@ ConvProblem conv_problem(const Shape& x, const Shape& w, const Shape& y, const C
   pr.pad_l = {p.pad_top, p.pad_left};
   pr.pad_r = {p.pad_bottom, p.pad_right};
   pr.bias = bias;
+  choose_conv_precision(pr);
   return pr;
 }
 
@@ -121,8 +123,9 @@ void conv2d_backward_weight(const KernelArgs& a) {
     zero_fill(gb);
     return;
   }
-  const ConvProblem pr =
+  ConvProblem pr =
       conv_problem(x.shape(), gw.shape(), gy.shape(), a.p<Conv2dParams>(), gb.defined());
+  pr.bf16 = bf16_backward_weights(pr);
   if (use_depthwise_kernel(pr, ConvPass::backward_weights)) {
     cpu::depthwise_conv2d_backward_weight(
         depthwise_geometry(x.shape(), gw.shape(), gy.shape(), a.p<Conv2dParams>()),
@@ -134,15 +137,28 @@ void conv2d_backward_weight(const KernelArgs& a) {
     pointwise_conv_backward_weight(gy, x, gw, gb);
     return;
   }
-  ChunkedPrimitive& plan = conv_pass_plan<ConvolutionFamily>(pr, ConvPass::backward_weights);
-  if (gb.defined()) {
-    plan.execute({x, gy, gw, gb});
-  } else {
-    plan.execute({x, gy, gw});
-  }
+  run_conv_backward_weights<ConvolutionFamily>(pr, x, gy, gw, gb);
 }
 
 }  // namespace
+
+void bias_gradient_nchw(const Tensor& gy, const Tensor& gb) {
+  const int64_t n = gy.shape()[0], c = gy.shape()[1], hw = gy.shape()[2] * gy.shape()[3];
+  const float* g = gy.data<float>();
+  float* out = gb.data<float>();
+  cpu::parallel_ranges(c, n * hw, [&](int64_t begin, int64_t end) {
+    for (int64_t ch = begin; ch < end; ++ch) {
+      double sum = 0;
+      for (int64_t i = 0; i < n; ++i) {
+        const float* row = g + (i * c + ch) * hw;
+        float part = 0;
+        for (int64_t k = 0; k < hw; ++k) part += row[k];
+        sum += part;
+      }
+      out[ch] = static_cast<float>(sum);
+    }
+  });
+}
 
 void register_conv_kernels(KernelRegistry& r) {
   r.add(OpId::conv2d, DeviceType::cpu, DType::f32, guarded<OpId::conv2d, conv2d>, "onednn");

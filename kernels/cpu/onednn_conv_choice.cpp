@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <atomic>
 
+#include "engine/compute_precision.h"
 #include "kernels/cpu/onednn_conv_family.h"
 
 namespace cvd::onednn {
@@ -32,11 +33,23 @@ void set_conv_chunk_budget_override(size_t bytes) { g_chunk_budget_override = by
 void set_depthwise_kernel_override(int mode) { g_depthwise_override = mode; }
 void set_pointwise_matmul_override(int mode) { g_pointwise_override = mode; }
 
+void choose_conv_precision(ConvProblem& p) {
+  const int64_t g = std::max<int64_t>(p.groups, 1);
+  const int64_t in_per_group = p.src[1] / g, out_per_group = p.dst[1] / g;
+  p.bf16 =
+      compute_precision() == ComputePrecision::bf16 && in_per_group >= 16 && out_per_group >= 16;
+}
+
+bool bf16_backward_weights(const ConvProblem& p) {
+  return p.bf16 && std::max(p.src.back(), p.dst.back()) <= kBf16BackwardWeightsMaxWidth;
+}
+
 bool use_pointwise_matmul(const ConvProblem& p) {
   const bool pointwise = p.groups == 1 && p.weights.size() == 4 && p.weights[2] == 1 &&
                          p.weights[3] == 1 && p.strides == dnnl::memory::dims{1, 1} &&
                          p.pad_l == dnnl::memory::dims{0, 0} && p.pad_r == dnnl::memory::dims{0, 0};
-  if (!pointwise) return false;
+  // The matmul path reads the f32 NCHW tensors in place; bf16 needs the convolution's reorders.
+  if (!pointwise || p.bf16) return false;
   const int forced = g_pointwise_override.load();
   return forced < 0 ? true : forced == 1;
 }

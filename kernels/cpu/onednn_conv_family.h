@@ -23,6 +23,8 @@ struct ConvProblem {
   dnnl::memory::dims strides, dilates, pad_l, pad_r;  // dilates in oneDNN's convention (d - 1)
   bool bias = false;
   int64_t groups = 1;
+  // Inputs of each pass rounded to bf16 (engine/compute_precision.h); results stay f32.
+  bool bf16 = false;
 };
 
 enum class ConvPass : int { forward, backward_data, backward_weights };
@@ -39,6 +41,11 @@ struct ConvPlanChoice {
 
 // Per-pass choice of layout and batch chunking (onednn_conv_choice.cpp).
 ConvPlanChoice choose_conv_plan(const ConvProblem& p, ConvPass pass);
+
+// Sets p.bf16 from the compute precision (engine/compute_precision.h): bf16 when asked for and
+// both sides have at least 16 channels per group. Narrower convolutions stay f32: they cost
+// little, and oneDNN 2.6's AMX backward kernels corrupt memory on them (seen with 64 -> 1).
+void choose_conv_precision(ConvProblem& p);
 
 // Whether a depthwise convolution (groups == in == out channels) runs the hand-written NCHW
 // kernel of cpu/depthwise_conv2d.h instead of a oneDNN primitive.
@@ -62,6 +69,27 @@ void set_conv_layout_override(int layout);
 void set_conv_chunk_budget_override(size_t bytes);
 void set_depthwise_kernel_override(int mode);
 void set_pointwise_matmul_override(int mode);
+
+// Sum of gy [N, C, H, W] over N, H and W into gb [C] (f64 accumulation). bf16 backward-weights
+// passes compute the bias gradient with this instead of the primitive: oneDNN 2.6's AMX kernel
+// writes the bias gradient padded to 16 channels, past the end of a smaller tensor.
+void bias_gradient_nchw(const Tensor& gy, const Tensor& gb);
+
+// Widest image (input or output, pixels) on which the backward-weights pass runs in bf16. oneDNN
+// 2.6's AMX backward-weights kernel corrupts the heap on wide rows: Mannequin's full-resolution
+// layers crashed at widths 336 to 384 and ran clean at 320 and below (bench_models --precision
+// bf16, 2026-12-01); its AVX512-BF16 fallback is slower than f32 there. Wider problems run that
+// pass in f32 (forward and backward data stay bf16).
+constexpr int64_t kBf16BackwardWeightsMaxWidth = 256;
+
+// Whether the backward-weights pass of `p` may run in bf16 (p.bf16 and no row wider than the
+// limit above).
+bool bf16_backward_weights(const ConvProblem& p);
+
+// The backward-weights pass of `pr` on {x, gy} into gw and, when defined, gb.
+template <class Family>
+void run_conv_backward_weights(ConvProblem pr, const Tensor& x, const Tensor& gy, const Tensor& gw,
+                               const Tensor& gb);
 
 struct ConvolutionFamily {
   using forward = dnnl::convolution_forward;
@@ -90,6 +118,13 @@ inline dnnl::memory::desc f32_desc(const dnnl::memory::dims& d, dnnl::memory::fo
   return dnnl::memory::desc(d, dnnl::memory::data_type::f32, t);
 }
 
+// The type a pass reads its inputs in: bf16 in bf16 mode, else f32.
+inline dnnl::memory::desc input_desc(const ConvProblem& p, const dnnl::memory::dims& d,
+                                     dnnl::memory::format_tag t) {
+  return dnnl::memory::desc(
+      d, p.bf16 ? dnnl::memory::data_type::bf16 : dnnl::memory::data_type::f32, t);
+}
+
 // The forward primitive descriptor (also the hint of the backward passes).
 template <class Family>
 typename Family::forward::primitive_desc forward_pd(const ConvProblem& p,
@@ -109,15 +144,19 @@ std::unique_ptr<ChunkedPrimitive> build_pass(const ConvProblem& p, ConvPass pass
   using tag = dnnl::memory::format_tag;
   const int64_t nb = p.src[0] / choice.chunks;
   const dnnl::memory::dims src_dims = with_batch(p.src, nb), dst_dims = with_batch(p.dst, nb);
-  const tag act = choice.layout == ActivationLayout::nchw ? tag::nchw : tag::any;
-  const dnnl::memory::desc src_req = f32_desc(src_dims, act), dst_req = f32_desc(dst_dims, act);
-  const dnnl::memory::desc weights_req = f32_desc(p.weights, tag::any);
+  // bf16 kernels (AMX / AVX512-BF16) need oneDNN's blocked layouts.
+  const tag act = choice.layout == ActivationLayout::nchw && !p.bf16 ? tag::nchw : tag::any;
+  // What each pass reads (bf16 in bf16 mode) and writes (always f32).
+  const dnnl::memory::desc src_in = input_desc(p, src_dims, act), src_out = f32_desc(src_dims, act);
+  const dnnl::memory::desc dst_in = input_desc(p, dst_dims, act), dst_out = f32_desc(dst_dims, act);
+  const dnnl::memory::desc weights_in = input_desc(p, p.weights, tag::any);
+  const dnnl::memory::desc weights_out = f32_desc(p.weights, tag::any);
   const dnnl::memory::desc src_user = f32_desc(src_dims, tag::nchw);
   const dnnl::memory::desc dst_user = f32_desc(dst_dims, tag::nchw);
   const dnnl::memory::desc weights_user = f32_desc(p.weights, p.weights_tag);
   const dnnl::memory::desc bias_user = f32_desc({p.dst[1]}, tag::x);
 
-  auto fwd = forward_pd<Family>(p, src_req, weights_req, dst_req);
+  auto fwd = forward_pd<Family>(p, src_in, weights_in, dst_out);
   std::vector<ArgSpec> args;
   switch (pass) {
     case ConvPass::forward: {
@@ -129,7 +168,7 @@ std::unique_ptr<ChunkedPrimitive> build_pass(const ConvProblem& p, ConvPass pass
                                                 choice.chunks);
     }
     case ConvPass::backward_data: {
-      typename Family::backward_data::desc d(Family::algorithm, src_req, weights_req, dst_req,
+      typename Family::backward_data::desc d(Family::algorithm, src_out, weights_in, dst_in,
                                              p.strides, p.dilates, p.pad_l, p.pad_r);
       typename Family::backward_data::primitive_desc pd(d, cpu_engine(), fwd);
       args.push_back({DNNL_ARG_DIFF_DST, ArgKind::batch_input, dst_user, pd.diff_dst_desc()});
@@ -141,8 +180,8 @@ std::unique_ptr<ChunkedPrimitive> build_pass(const ConvProblem& p, ConvPass pass
     case ConvPass::backward_weights: {
       const dnnl::memory::desc bias_req =
           p.bias ? f32_desc({p.dst[1]}, tag::x) : dnnl::memory::desc();
-      typename Family::backward_weights::desc d(Family::algorithm, src_req, weights_req, bias_req,
-                                                dst_req, p.strides, p.dilates, p.pad_l, p.pad_r);
+      typename Family::backward_weights::desc d(Family::algorithm, src_in, weights_out, bias_req,
+                                                dst_in, p.strides, p.dilates, p.pad_l, p.pad_r);
       typename Family::backward_weights::primitive_desc pd(d, cpu_engine(), fwd);
       args.push_back({DNNL_ARG_SRC, ArgKind::batch_input, src_user, pd.src_desc()});
       args.push_back({DNNL_ARG_DIFF_DST, ArgKind::batch_input, dst_user, pd.diff_dst_desc()});
@@ -169,8 +208,23 @@ ChunkedPrimitive& conv_pass_plan(const ConvProblem& p, ConvPass pass) {
   key.add(Family::id).add(static_cast<int64_t>(pass)).add(onednn_threads());
   key.add(p.src).add(p.dst).add(p.weights).add(static_cast<int64_t>(p.weights_tag));
   key.add(p.strides).add(p.dilates).add(p.pad_l).add(p.pad_r).add(p.bias ? 1 : 0);
-  key.add(static_cast<int64_t>(choice.layout)).add(choice.chunks);
+  key.add(static_cast<int64_t>(choice.layout)).add(choice.chunks).add(p.bf16 ? 1 : 0);
   return cache.get(key, [&] { return detail::build_pass<Family>(p, pass, choice); });
+}
+
+template <class Family>
+void run_conv_backward_weights(ConvProblem pr, const Tensor& x, const Tensor& gy, const Tensor& gw,
+                               const Tensor& gb) {
+  pr.bf16 = bf16_backward_weights(pr);
+  const bool own_bias = pr.bf16 && gb.defined();
+  if (own_bias) pr.bias = false;
+  ChunkedPrimitive& plan = conv_pass_plan<Family>(pr, ConvPass::backward_weights);
+  if (pr.bias) {
+    plan.execute({x, gy, gw, gb});
+  } else {
+    plan.execute({x, gy, gw});
+  }
+  if (own_bias) bias_gradient_nchw(gy, gb);
 }
 
 }  // namespace cvd::onednn

@@ -43,6 +43,7 @@ ConvProblem deconv_problem(const Shape& x, const Shape& w, const Shape& y,
   pr.pad_l = {p.pad_top, p.pad_left};
   pr.pad_r = {p.pad_bottom - p.output_padding_h, p.pad_right - p.output_padding_w};
   pr.bias = bias;
+  choose_conv_precision(pr);
   return pr;
 }
 
@@ -92,12 +93,7 @@ void conv_transpose2d_backward_weight(const KernelArgs& a) {
   }
   const ConvProblem pr =
       deconv_problem(x.shape(), gw.shape(), gy.shape(), a.p<ConvTranspose2dParams>(), gb.defined());
-  ChunkedPrimitive& plan = conv_pass_plan<DeconvolutionFamily>(pr, ConvPass::backward_weights);
-  if (gb.defined()) {
-    plan.execute({x, gy, gw, gb});
-  } else {
-    plan.execute({x, gy, gw});
-  }
+  run_conv_backward_weights<DeconvolutionFamily>(pr, x, gy, gw, gb);
 }
 
 }  // namespace

@@ -16,6 +16,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "engine/autograd.h"
+#include "engine/compute_precision.h"
 #include "engine/cvdw.h"
 #include "engine/error.h"
 #include "engine/module_weights.h"
@@ -37,6 +38,7 @@ struct DepthArgs {
   std::string model, arch, input, output;
   int size = 384;
   int max_frames = 0;
+  std::string precision = "f32";
 };
 
 // The network described by the weights file (arch and width from its header; --arch checks).
@@ -79,6 +81,7 @@ void run_depth(const DepthArgs& a) {
         "no depth network weights given: cvd ships no pretrained weights. Convert published "
         "MiDaS / Mannequin Challenge weights with `cvd convert MODEL.onnx --arch ARCH -o "
         "MODEL.cvdw` (README, 'Converting published weights') and pass --model MODEL.cvdw");
+  ScopedComputePrecision precision(parse_precision(a.precision));
   CVD_CHECK(a.size >= 16 && a.size <= 8192, "--size must be in [16, 8192], got {}", a.size);
   CVD_CHECK(fs::exists(a.input), "input '{}' does not exist", a.input);
   std::unique_ptr<DepthNet> net = load_net(a);
@@ -151,6 +154,10 @@ const CommandRegistration registration(50, [](CLI::App& app) {
   sub->add_option("--size", args->size, "Long side of the network input (pixels)")
       ->capture_default_str();
   sub->add_option("--max-frames", args->max_frames, "Process at most this many frames (0 = all)")
+      ->capture_default_str();
+  sub->add_option("--precision", args->precision,
+                  "Convolution arithmetic: f32, or bf16 on AMX / AVX512-BF16")
+      ->check(CLI::IsMember({"f32", "bf16"}))
       ->capture_default_str();
   sub->callback([args] { run_depth(*args); });
 });

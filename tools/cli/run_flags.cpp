@@ -55,6 +55,9 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s) {
                 "Weight of the disparity term (default per architecture)");
   c->add_option("--seed", o.seed, "Random seed");
   c->add_option("--warmup", o.warmup_steps, "Sparse-depth warm-up steps of the default network");
+  c->add_option("--precision", o.precision,
+                "Convolution arithmetic: f32, or bf16 on AMX / AVX512-BF16 (f32 weights)")
+      ->check(CLI::IsMember({"f32", "bf16"}));
   c->add_flag("!--no-videos", o.write_videos, "Do not write depth.mp4 and side_by_side.mp4");
   c->add_flag("!--no-ply", o.write_point_cloud, "Do not write points.ply");
   c->add_option("--gt", o.gt, "Ground truth folder: evaluate the result against it");

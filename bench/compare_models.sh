@@ -3,9 +3,14 @@
 # step (forward in BN train mode + backward + Adam) with 8 images, MiDaS v2 and Mannequin at
 # 384x224, MiDaS small at 256x160. Each configuration runs in its own process (one warm-up
 # iteration, then ITERS timed) so that peak RSS is its own. Prints a table: seconds, the ratio
-# PyTorch / ours (> 1: we are faster), peak RSS of each and MFU against PEAK_GFLOPS.
+# PyTorch / ours (> 1: we are faster), peak RSS of each, MFU against PEAK_GFLOPS and, for a
+# training step, the relative difference of the two losses (same weights, inputs and loss, so it
+# shows both sides computed the same step). The training loss is the CVD geometric loss on 4
+# synthetic pairs (LOSS=surrogate: mean(output * R)). PRECISION=bf16 runs ours with
+# --precision bf16 (PyTorch stays f32).
 #
-#   bench/compare_models.sh BUILD_DIR [arch ...]     (env: ITERS=1 BATCH=8 PEAK_GFLOPS=256 THREADS=2)
+#   bench/compare_models.sh BUILD_DIR [arch ...]
+#     (env: ITERS=1 BATCH=8 PEAK_GFLOPS=256 THREADS=2 LOSS=geometric PRECISION=f32)
 # Needs bench_models built (cmake -DCVD_BUILD_BENCH=ON) and /usr/bin/python3 with torch.
 set -euo pipefail
 BUILD=${1:?usage: compare_models.sh BUILD_DIR [arch ...]}
@@ -18,30 +23,33 @@ PY=(/usr/bin/python3 "$ROOT/tools/reference/bench_models_torch.py")
 ITERS=${ITERS:-1}
 BATCH=${BATCH:-8}
 PEAK=${PEAK_GFLOPS:-256}
+LOSS=${LOSS:-geometric}
+PRECISION=${PRECISION:-f32}
 export OMP_NUM_THREADS=${THREADS:-2}
 TMP=$(mktemp -d)
 trap 'rm -rf "$TMP"' EXIT
 [ -x "$BIN" ] || { echo "compare_models.sh: $BIN not found (build target bench_models)" >&2; exit 1; }
 
-echo "# $(date -u +%Y-%m-%dT%H:%MZ) $(lscpu | sed -n 's/^Model name: *//p'), $(nproc) cores, OMP_NUM_THREADS=$OMP_NUM_THREADS, peak $PEAK GFLOP/s"
-printf '%-12s %-6s %-8s %9s %9s %7s %10s %10s %7s %7s\n' arch mode size ours_s torch_s ratio ours_MiB torch_MiB ours_mfu torch_mfu
+echo "# $(date -u +%Y-%m-%dT%H:%MZ) $(lscpu | sed -n 's/^Model name: *//p'), $(nproc) cores, OMP_NUM_THREADS=$OMP_NUM_THREADS, peak $PEAK GFLOP/s, loss $LOSS, ours in $PRECISION"
+printf '%-12s %-6s %-8s %9s %9s %7s %10s %10s %8s %8s %9s\n' arch mode size ours_s torch_s ratio ours_MiB torch_MiB ours_mfu torch_mfu loss_rdiff
 for arch in "${ARCHS[@]}"; do
   if [ "$arch" = midas_small ]; then H=160; W=256; else H=224; W=384; fi
   weights="$TMP/$arch.cvdw"
   "$BIN" --arch "$arch" --save-weights "$weights"
   gmac=$("${PY[@]}" --arch "$arch" --height $H --width $W --weights "$weights" --gmac-only)
   for mode in infer train; do
-    common=(--arch "$arch" --mode $mode --batch "$BATCH" --height $H --width $W --iters "$ITERS" --weights "$weights" --peak-gflops "$PEAK")
-    ours=$("$BIN" "${common[@]}" --gmac "$gmac" | tail -1)
+    common=(--arch "$arch" --mode $mode --batch "$BATCH" --height $H --width $W --iters "$ITERS" --weights "$weights" --peak-gflops "$PEAK" --loss "$LOSS")
+    ours=$("$BIN" "${common[@]}" --gmac "$gmac" --precision "$PRECISION" | tail -1)
     torch=$("${PY[@]}" "${common[@]}" | tail -1)
     echo "$ours" >> "$TMP/results.jsonl"
     echo "$torch" >> "$TMP/results.jsonl"
     /usr/bin/python3 - "$ours" "$torch" <<'PYEOF'
 import json, sys
 o, t = json.loads(sys.argv[1]), json.loads(sys.argv[2])
+rdiff = abs(o['check'] - t['check']) / max(abs(t['check']), 1e-30)
 print(f"{o['arch']:<12} {o['mode']:<6} {o['size']:<8} {o['seconds']:9.2f} {t['seconds']:9.2f} "
       f"{t['seconds'] / o['seconds']:7.2f} {o['peak_rss_mib']:10.0f} {t['peak_rss_mib']:10.0f} "
-      f"{o['mfu']:7.1%} {t['mfu']:7.1%}")
+      f"{o['mfu']:8.1%} {t['mfu']:8.1%} {rdiff:9.1e}")
 PYEOF
   done
 done

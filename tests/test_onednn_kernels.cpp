@@ -26,6 +26,7 @@
 #include "kernels/cpu/onednn_context.h"
 #include "kernels/cpu/onednn_conv_family.h"
 #include "kernels/kernel_params.h"
+#include "tests/test_support.h"
 
 namespace cvd {
 namespace {
@@ -267,8 +268,7 @@ struct PrecisionOverride {
 };
 
 TEST(OnednnConv, Bf16MatchesReferenceWithinBf16Rounding) {
-  std::string why;
-  if (!bf16_supported(&why)) GTEST_SKIP() << "no native bf16 on this CPU: " << why;
+  CVD_REQUIRE_NATIVE_BF16();
   PrecisionOverride bf16(ComputePrecision::bf16);
   for (const ConvCase& cc : conv_cases()) check_conv_case(cc, 8e-3);
   // Shapes of the depth networks' wide layers (Mannequin's inception branches), in one chunk and
@@ -370,8 +370,7 @@ TEST(OnednnDeconv, MatchesReferenceBatchSplitIntoChunks) {
 }
 
 TEST(OnednnDeconv, Bf16MatchesReferenceWithinBf16Rounding) {
-  std::string why;
-  if (!bf16_supported(&why)) GTEST_SKIP() << "no native bf16 on this CPU: " << why;
+  CVD_REQUIRE_NATIVE_BF16();
   PrecisionOverride bf16(ComputePrecision::bf16);
   for (const DeconvCase& dc : deconv_cases()) check_deconv_case(dc, 8e-3);
   // 16+ channels a side (so bf16 really runs), FlowNet2's upconvolution shape, and an output

@@ -98,8 +98,7 @@ double abs_rel_vs_gt(const fs::path& run, const fs::path& scene) {
 // 1.2 AbsRel(f32) (measured 0.233 vs 0.298). The networks' bf16 arithmetic itself is checked
 // tightly by the next test and by test_onednn_kernels.
 TEST_F(PrecisionClip, Bf16RunStaysWithinTheTrainingsOwnSpreadOfTheF32Run) {
-  std::string why;
-  if (!bf16_supported(&why)) GTEST_SKIP() << "no native bf16 on this CPU: " << why;
+  CVD_REQUIRE_NATIVE_BF16();
   const fs::path f32 = dir_->path() / "f32", bf16 = dir_->path() / "bf16",
                  f32_seed2 = dir_->path() / "f32-seed2";
   for (const auto& [out, args] :
@@ -127,8 +126,7 @@ TEST_F(PrecisionClip, Bf16RunStaysWithinTheTrainingsOwnSpreadOfTheF32Run) {
 // f32: largest difference <= 0.5% of the output's range (measured 0.10%). bf16 rounds each
 // convolution's inputs to 2^-9 relative, and tens of layers accumulate that.
 TEST(ComputePrecision, Bf16InferenceOfTheMannequinNetworkMatchesF32) {
-  std::string why;
-  if (!bf16_supported(&why)) GTEST_SKIP() << "no native bf16 on this CPU: " << why;
+  CVD_REQUIRE_NATIVE_BF16();
   // MiDaS with random weights outputs all zeros (its final ReLU), so only Mannequin here.
   for (const char* arch : {"mannequin"}) {
     SCOPED_TRACE(arch);

@@ -7,6 +7,8 @@
 #include <filesystem>
 #include <string>
 
+#include "engine/compute_precision.h"
+
 namespace cvd::test {
 
 // ../shared/data/<name>, or empty when absent (then the test must GTEST_SKIP with a reason).
@@ -20,6 +22,13 @@ inline std::filesystem::path shared_data(const std::string& name) {
   if (var.empty()) {                                                                  \
     GTEST_SKIP() << "shared data '" << name << "' not found under " << CVD_SHARED_DIR \
                  << "/data (it exists in CI and on developer machines)";              \
+  }
+
+// Skips the test on a CPU whose oneDNN ISA has neither AMX nor AVX512-BF16
+// (engine/compute_precision.h), saying what it offers.
+#define CVD_REQUIRE_NATIVE_BF16()                                      \
+  if (std::string why_no_bf16; !::cvd::bf16_supported(&why_no_bf16)) { \
+    GTEST_SKIP() << "no native bf16 on this CPU: " << why_no_bf16;     \
   }
 
 // A fresh empty directory under the system temp dir, removed when the object dies.

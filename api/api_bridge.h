@@ -20,14 +20,14 @@
 #include "engine/ops.h"
 #include "engine/random.h"
 #include "models/depth_net.h"
-#include "pipeline/camera.h"
-#include "pipeline/flow_dis.h"
-#include "pipeline/flow_estimator.h"
-#include "pipeline/flow_flownet2.h"
-#include "pipeline/flow_pair.h"
-#include "pipeline/frame_source.h"
-#include "pipeline/run_pipeline.h"
-#include "pipeline/run_stages.h"
+#include "pipeline/flow/flow_dis.h"
+#include "pipeline/flow/flow_estimator.h"
+#include "pipeline/flow/flow_flownet2.h"
+#include "pipeline/flow/flow_pair.h"
+#include "pipeline/geometry/camera.h"
+#include "pipeline/io/frame_source.h"
+#include "pipeline/run/run_pipeline.h"
+#include "pipeline/run/run_stages.h"
 
 namespace cvd::api_bridge {
 using CoreDevice = ::cvd::Device;

@@ -1,5 +1,6 @@
 // cvd::DepthModel over models/depth_net.h: load or create a DepthNet and run it without autograd.
 #include "api/api_bridge.h"
+#include "kernels/builtin_backends.h"
 // (api_bridge.h includes the internal headers this file uses, before the public ones)
 #include <algorithm>
 
@@ -33,6 +34,7 @@ void check_arch(const std::string& arch, const std::string& where) {
 }  // namespace
 
 bool device_available(Device device, std::string* reason) {
+  register_builtin_backends();
   if (device == Device::cpu) return true;
   if (cuda_device_count() > 0) return true;
   if (reason) *reason = "Device::cuda is unavailable: " + cuda_runtime_status();
@@ -45,6 +47,7 @@ DepthModel& DepthModel::operator=(DepthModel&&) noexcept = default;
 DepthModel::~DepthModel() = default;
 
 DepthModel DepthModel::load(const std::string& cvdw_path, const DepthModelOptions& options) {
+  register_builtin_backends();
   check_options(options);
   std::string arch;
   double width = 1.0;
@@ -72,6 +75,7 @@ DepthModel DepthModel::load(const std::string& cvdw_path, const DepthModelOption
 }
 
 DepthModel DepthModel::create_default(const DepthModelOptions& options) {
+  register_builtin_backends();
   check_options(options);
   check_arch(options.arch, "DepthModelOptions::arch");
   CVD_CHECK(options.width > 0 && options.width <= 4,

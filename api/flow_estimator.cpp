@@ -1,6 +1,7 @@
-// cvd::FlowEstimator over pipeline/flow_pair.h with DIS (pipeline/flow_dis.h) or FlowNet2
-// (pipeline/flow_flownet2.h).
+// cvd::FlowEstimator over pipeline/flow/flow_pair.h with DIS (pipeline/flow/flow_dis.h) or FlowNet2
+// (pipeline/flow/flow_flownet2.h).
 #include "api/api_bridge.h"
+#include "kernels/builtin_backends.h"
 // (api_bridge.h includes the internal headers this file uses, before the public ones)
 
 namespace cvd::v1 {
@@ -31,6 +32,7 @@ FlowField field_from(const cv::Mat& flow, const cv::Mat& mask, double valid_frac
 }  // namespace
 
 FlowEstimator::FlowEstimator(const FlowOptions& options) : impl_(std::make_unique<Impl>()) {
+  register_builtin_backends();
   CVD_CHECK(options.fb_threshold_px > 0, "FlowOptions::fb_threshold_px must be positive, got {}",
             options.fb_threshold_px);
   if (options.method == FlowMethod::dis) {

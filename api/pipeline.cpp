@@ -1,6 +1,7 @@
-// cvd::Pipeline over pipeline/run_pipeline.h: PipelineOptions -> RunOptions, RunResult ->
+// cvd::Pipeline over pipeline/run/run_pipeline.h: PipelineOptions -> RunOptions, RunResult ->
 // PipelineResult.
 #include "api/api_bridge.h"
+#include "kernels/builtin_backends.h"
 // (api_bridge.h includes the internal headers this file uses, before the public ones)
 #include <filesystem>
 #include <random>
@@ -105,6 +106,7 @@ class TemporaryDirectory {
 Pipeline::Pipeline(PipelineOptions options) : options_(std::move(options)) {}
 
 PipelineResult Pipeline::run() {
+  register_builtin_backends();
   CVD_CHECK(!options_.input.empty(),
             "PipelineOptions::input is empty: give a video or a folder of frames");
   RunOptions o = to_run_options(options_);

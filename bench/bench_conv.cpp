@@ -21,11 +21,12 @@
 #include <vector>
 
 #include "engine/dispatch.h"
+#include "engine/kernel_params.h"
 #include "engine/random.h"
 #include "engine/tensor.h"
+#include "kernels/builtin_backends.h"
 #include "kernels/cpu/onednn_context.h"
 #include "kernels/cpu/onednn_conv_family.h"
-#include "kernels/kernel_params.h"
 
 namespace cvd {
 namespace {
@@ -267,6 +268,7 @@ void register_all() {
 }  // namespace cvd
 
 int main(int argc, char** argv) {
+  cvd::register_builtin_backends();
   cvd::register_all();
   benchmark::Initialize(&argc, argv);
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;

@@ -9,10 +9,11 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "pipeline/flow_consistency.h"
-#include "pipeline/flow_dis.h"
-#include "pipeline/flow_homography.h"
-#include "pipeline/flow_pair.h"
+#include "bench/bench_main.h"
+#include "pipeline/flow/flow_consistency.h"
+#include "pipeline/flow/flow_dis.h"
+#include "pipeline/flow/flow_homography.h"
+#include "pipeline/flow/flow_pair.h"
 
 namespace {
 
@@ -89,4 +90,4 @@ BENCHMARK(BM_PairFlowMediumWithHomography)->Unit(benchmark::kMillisecond)->UseRe
 
 }  // namespace
 
-BENCHMARK_MAIN();
+CVD_BENCHMARK_MAIN()

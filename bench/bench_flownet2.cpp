@@ -1,6 +1,6 @@
 // FlowNet2 inference on the CPU at 1024x448 (the flow resolution of the pipeline: long side 1024,
 // multiples of 64), full width, random weights, f32, one image pair, no autograd. Reports the
-// time and the model FLOP utilisation: 232 GMAC per forward (shared/MODELS.md, FlowNet2 GMAC at
+// time and the model FLOP utilisation: 232 GMAC per forward (docs/models.md section 8, FlowNet2 GMAC at
 // 1024x448) over the peak f32 rate of the cores used. The peak is
 //   threads x CVD_PEAK_FLOP_PER_CYCLE (default 64: two 512-bit FMA units) x GHz,
 // with GHz from CVD_PEAK_GHZ or else /proc/cpuinfo's "cpu MHz".
@@ -14,12 +14,13 @@
 #include <opencv2/imgproc.hpp>
 #include <string>
 
+#include "bench/bench_main.h"
 #include "engine/autograd.h"
 #include "models/flownet2.h"
 
 namespace {
 
-constexpr double kGmacPerForward = 232.0;  // FlowNet2 @ 1024x448 (MODELS.md)
+constexpr double kGmacPerForward = 232.0;  // FlowNet2 @ 1024x448 (docs/models.md section 8)
 
 double env_or(const char* name, double fallback) {
   const char* v = std::getenv(name);
@@ -73,4 +74,4 @@ BENCHMARK(BM_FlowNet2Forward)->Unit(benchmark::kMillisecond)->UseRealTime()->Ite
 
 }  // namespace
 
-BENCHMARK_MAIN();
+CVD_BENCHMARK_MAIN()

@@ -7,7 +7,7 @@
 //                [--iters 1] [--warmup 1] [--weights file.cvdw] [--save-weights file.cvdw]
 //                [--gmac G] [--peak-gflops P] [--precision f32|bf16]
 //                [--loss geometric|surrogate]
-// A training step's loss is by default the CVD geometric loss (pipeline/geometric_loss.h) on 4
+// A training step's loss is by default the CVD geometric loss (pipeline/training/geometric_loss.h) on 4
 // frame pairs (images 2k and 2k+1) with fixed synthetic cameras and flow (bench_pairs below;
 // tools/reference/bench_models_torch.py builds the same), as test-time training computes it;
 // --loss surrogate uses mean(output * R) with a fixed random R instead.
@@ -17,7 +17,7 @@
 // iterations (engine/op_profiler.h).
 // Prints one JSON line: seconds per iteration, peak RSS, GFLOP/s and MFU against --peak-gflops
 // (default: 2 cores x 2.0 GHz x 64 f32 FLOP/cycle (AVX-512, two FMA ports) = 256 GFLOP/s).
-// --gmac is the forward multiply-accumulates per image at this size; without it the MODELS.md
+// --gmac is the forward multiply-accumulates per image at this size; without it the docs/models.md
 // figure at 384x224 is scaled by the pixel count. A training step counts 3x the forward.
 #include <sys/resource.h>
 
@@ -38,9 +38,10 @@
 #include "engine/module_weights.h"
 #include "engine/op_profiler.h"
 #include "engine/ops.h"
+#include "kernels/builtin_backends.h"
 #include "models/depth_net.h"
 #include "models/depth_net_state.h"
-#include "pipeline/geometric_loss.h"
+#include "pipeline/training/geometric_loss.h"
 
 namespace {
 
@@ -96,7 +97,7 @@ Args parse(int argc, char** argv) {
   return a;
 }
 
-// Forward GMAC per image at 384x224 (shared/MODELS.md).
+// Forward GMAC per image at 384x224 (docs/models.md section 8).
 double table_gmac(const std::string& arch, int h, int w) {
   const double at_384x224 = arch == "midas_v2" ? 60.3 : arch == "mannequin" ? 52.8 : 6.03;
   return at_384x224 * (static_cast<double>(h) * w) / (384.0 * 224.0);
@@ -142,7 +143,7 @@ std::vector<BenchPair> bench_pairs(int batch, int H, int W) {
   return pairs;
 }
 
-// DESIGN.md 6.6: lambda of the disparity term per architecture.
+// docs/design.md 5.7: lambda of the disparity term per architecture.
 double bench_lambda(const std::string& arch) { return arch == "mannequin" ? 0.1 : 1e-4; }
 
 double peak_rss_mib() {
@@ -154,6 +155,7 @@ double peak_rss_mib() {
 }  // namespace
 
 int main(int argc, char** argv) {
+  cvd::register_builtin_backends();
   try {
     const Args a = parse(argc, argv);
     cvd::set_compute_precision(cvd::parse_precision(a.precision));

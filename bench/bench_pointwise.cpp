@@ -8,10 +8,11 @@
 #include <string>
 #include <vector>
 
+#include "bench/bench_main.h"
 #include "engine/dispatch.h"
+#include "engine/kernel_params.h"
 #include "engine/random.h"
 #include "engine/tensor.h"
-#include "kernels/kernel_params.h"
 
 namespace cvd {
 namespace {
@@ -209,4 +210,4 @@ BENCHMARK(BM_ReduceSumKeepChannels)->Unit(benchmark::kMillisecond)->UseRealTime(
 }  // namespace
 }  // namespace cvd
 
-BENCHMARK_MAIN();
+CVD_BENCHMARK_MAIN()

@@ -3,7 +3,7 @@
 #include <cmath>
 
 #include "engine/dispatch.h"
-#include "kernels/kernel_params.h"
+#include "engine/kernel_params.h"
 
 namespace cvd {
 

@@ -1,4 +1,5 @@
-// What this build and machine offer: compiled-in backends and devices found at run time.
+// What this build and machine offer: the registered backends (engine/backend_registry.h) and
+// the devices they find at run time.
 #pragma once
 #include <string>
 #include <vector>
@@ -11,9 +12,9 @@ namespace cvd {
 int cuda_device_count();
 // One line describing the CUDA runtime state (e.g. "2 devices" or why none is usable).
 std::string cuda_runtime_status();
-// Copies a contiguous tensor to another device (provided by the device backend).
+// Copies a contiguous tensor to another device (through the device backend's hook).
 Tensor device_copy(const Tensor& x, Device d);
-// Names of the compiled-in backends, e.g. {"reference", "cpu (oneDNN 2.6, OpenMP)", "cuda"}.
+// Descriptions of the registered backends, e.g. {"reference", "cpu (oneDNN 2.6, OpenMP)", "cuda"}.
 std::vector<std::string> compiled_backends();
 
 }  // namespace cvd

@@ -1,5 +1,5 @@
-// The process-wide compute precision (engine/compute_precision.h); the CPU support query lives
-// with the oneDNN backend (kernels/cpu/onednn_context.cpp).
+// The process-wide compute precision (engine/compute_precision.h); the CPU support query goes
+// to the backend that registered one (engine/backend_registry.cpp).
 #include "engine/compute_precision.h"
 
 #include <atomic>

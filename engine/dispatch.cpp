@@ -1,7 +1,6 @@
 #include "engine/dispatch.h"
 
-#include <mutex>
-
+#include "engine/backend_registry.h"
 #include "engine/op_profiler.h"
 
 namespace cvd {
@@ -25,22 +24,15 @@ const KernelInfo* KernelRegistry::find(OpId op, DeviceType dev, DType dt) const 
   return k.fn ? &k : nullptr;
 }
 
-const KernelRegistry& kernel_registry() {
-  static KernelRegistry reg;
-  static std::once_flag once;
-  std::call_once(once, [] {
-    register_reference_kernels(reg);
-    register_cpu_kernels(reg);
-    register_cuda_kernels(reg);
-  });
-  return reg;
-}
-
 void dispatch(OpId op, const Tensor& key, const KernelArgs& args) {
   const KernelInfo* k = kernel_registry().find(op, key.device().type, key.dtype());
   if (!k) {
-    fail(ErrorCategory::unsupported, "no kernel for op '{}' on device {} with dtype {}",
-         op_name(op), key.device().str(), dtype_name(key.dtype()));
+    fail(ErrorCategory::unsupported, "no kernel for op '{}' on device {} with dtype {}{}",
+         op_name(op), key.device().str(), dtype_name(key.dtype()),
+         registered_backends().empty()
+             ? " (no backend is registered: call cvd::register_builtin_backends(), "
+               "kernels/builtin_backends.h)"
+             : "");
   }
   if (!op_profiler::enabled()) {
     k->fn(args);

@@ -56,7 +56,7 @@ const char* op_name(OpId op);
 
 // Arguments of one kernel call. Outputs are allocated (contiguous, right shape and dtype) by the
 // caller; optional tensors are undefined Tensors. `params` points at the op's params struct from
-// kernels/kernel_params.h.
+// engine/kernel_params.h.
 struct KernelArgs {
   std::vector<Tensor> in;
   std::vector<Tensor> out;
@@ -84,16 +84,11 @@ class KernelRegistry {
   KernelInfo table_[kNumOps][kNumDeviceTypes][2];
 };
 
-// The process-wide registry; all compiled-in backends are registered on first use.
+// The process-wide table, filled by the backends registered through engine/backend_registry.h.
 const KernelRegistry& kernel_registry();
 
 // Looks up the kernel for (op, device and dtype of `key`) and runs it. A missing kernel is an
 // Error(unsupported) naming the op, device and dtype.
 void dispatch(OpId op, const Tensor& key, const KernelArgs& args);
-
-// Backend registration entry points (each backend defines its own).
-void register_reference_kernels(KernelRegistry& r);  // kernels/reference: f64 on cpu (the oracle)
-void register_cpu_kernels(KernelRegistry& r);        // kernels/cpu: f32 on cpu
-void register_cuda_kernels(KernelRegistry& r);       // kernels/cuda: f32 on cuda (no-op without)
 
 }  // namespace cvd

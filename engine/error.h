@@ -1,35 +1,14 @@
-// cvd::Error: the one exception type the library throws, with a category a caller can switch on.
+// The library's error helpers around cvd::Error, the one exception type it throws. The type and
+// its categories are the public ones of include/cvd/error.h (defined once, there); this header
+// adds fail() and the CVD_CHECK / CVD_ASSERT macros the sources use.
 #pragma once
 #include <fmt/format.h>
 
-#include <stdexcept>
 #include <string>
 
+#include "cvd/error.h"
+
 namespace cvd {
-
-enum class ErrorCategory {
-  invalid_argument,  // a caller passed something malformed (shape mismatch, bad option)
-  io,                // a file could not be opened, read or written
-  format,            // a file was read but its content is corrupt or of the wrong kind
-  unsupported,       // valid request that this build cannot serve (missing kernel, device)
-  numerical,         // NaN / Inf where a finite value is required
-  device,            // accelerator errors
-  external,          // an external program (COLMAP, ffmpeg) failed
-  cancelled,         // the caller asked to stop
-  internal,          // a broken invariant: a bug in cvd
-};
-
-const char* error_category_name(ErrorCategory c);
-
-class Error : public std::runtime_error {
- public:
-  Error(ErrorCategory category, const std::string& message)
-      : std::runtime_error(message), category_(category) {}
-  ErrorCategory category() const { return category_; }
-
- private:
-  ErrorCategory category_;
-};
 
 template <class... Args>
 [[noreturn]] void fail(ErrorCategory c, fmt::format_string<Args...> f, Args&&... args) {

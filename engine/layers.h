@@ -10,9 +10,9 @@
 #include <optional>
 #include <string>
 
+#include "engine/kernel_params.h"
 #include "engine/module.h"
 #include "engine/random.h"
-#include "kernels/kernel_params.h"
 
 namespace cvd {
 

@@ -5,8 +5,8 @@
 #pragma once
 #include <vector>
 
+#include "engine/kernel_params.h"
 #include "engine/tensor.h"
-#include "kernels/kernel_params.h"
 
 namespace cvd {
 

@@ -1,6 +1,6 @@
 // Element-wise ops: unary (with scalar parameters), broadcasting binaries, comparisons, where.
+#include "engine/elementwise_math.h"
 #include "engine/op_support.h"
-#include "kernels/elementwise_math.h"
 
 namespace cvd {
 
@@ -46,7 +46,7 @@ Tensor unary(const Tensor& x_in, const UnaryParams& p) {
   Tensor y = empty_like_kind(x.shape(), x);
   dispatch(OpId::unary, x, KernelArgs{{x}, {y}, &p});
   if (!any_requires_grad({x})) return y;
-  // Save only what the op's derivative reads (kernels/elementwise_math.h): relu-like ops and
+  // Save only what the op's derivative reads (engine/elementwise_math.h): relu-like ops and
   // sigmoid / tanh / exp / sqrt / reciprocal read the output, so an activation's input (e.g. a
   // batch norm's output) is not kept alive for backward; scalar ops read neither.
   const UnaryOperands reads = unary_backward_reads(p.op);

@@ -2,6 +2,7 @@
 // clone, dtype/device conversion), concat and pad.
 #include <numeric>
 
+#include "engine/backend_info.h"
 #include "engine/op_support.h"
 
 namespace cvd {
@@ -166,8 +167,7 @@ Tensor Tensor::to(DType t) const {
   });
 }
 
-// Cross-device copies are provided by the device backend (kernels/cuda) when compiled in.
-Tensor device_copy(const Tensor& x, Device d);
+// Cross-device copies go through the device backend's hook (engine/backend_registry.h).
 
 Tensor Tensor::to(Device d) const {
   if (d == device()) return *this;

@@ -5,9 +5,9 @@
 
 #include "engine/autograd.h"
 #include "engine/dispatch.h"
+#include "engine/kernel_params.h"
 #include "engine/ops.h"
 #include "engine/random.h"
-#include "kernels/kernel_params.h"
 
 namespace cvd {
 

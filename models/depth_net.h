@@ -31,7 +31,7 @@ class DepthNet : public Module {
   virtual Tensor output_bias() = 0;
 
   // Module name prefixes in the order forward_raw first runs them, for matching the layers of
-  // an imported graph by structure (models/onnx_weights.h). A prefix stands for all layers under
+  // an imported graph by structure (tools/convert/onnx_weights.h). A prefix stands for all layers under
   // it in registration order; modules the forward never runs (e.g. MiDaS v2's
   // scratch.refinenet4.resConfUnit1) are left out. Default {""}: registration order.
   virtual std::vector<std::string> execution_order() const { return {""}; }
@@ -43,7 +43,8 @@ class DepthNet : public Module {
   Tensor forward(const Tensor& rgb01) override { return depth(rgb01); }
 };
 
-// Creates an architecture with random weights drawn from `gen` (PyTorch default init).
+// Creates an architecture of models/depth_net_architectures.h with random weights drawn from `gen`
+// (PyTorch default init).
 // `width` scales every channel count (1.0 = the published network); tests use tiny widths.
 std::unique_ptr<DepthNet> create_depth_net(const std::string& arch, double width, Generator& gen);
 std::vector<std::string> depth_net_archs();

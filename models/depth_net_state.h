@@ -1,5 +1,5 @@
 // Loading released state dicts into a DepthNet: the MiDaS files hold weights that the forward
-// never uses (scratch.refinenet4.resConfUnit1.*, DESIGN.md trap 7); they are dropped, every other
+// never uses (scratch.refinenet4.resConfUnit1.*, docs/models.md section 7); they are dropped, every other
 // name must match (strict).
 #pragma once
 #include <map>

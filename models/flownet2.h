@@ -1,6 +1,6 @@
 // FlowNet2 (Ilg et al. 2017) as NVIDIA/flownet2-pytorch's models.FlowNet2 (batchNorm=False,
 // div_flow 20, rgb_max 255): FlowNetC -> FlowNetS -> FlowNetS, FlowNetSD in parallel, fused by
-// FlowNetFusion. 162,518,834 parameters at width 1. The chain (shared/MODELS.md):
+// FlowNetFusion. 162,518,834 parameters at width 1. The chain (docs/models.md section 5):
 //   x = (images - per-pair per-channel mean over both frames) / 255;
 //   C(x) -> bilinear x4 (align_corners=False) of flow2 * 20 = f1; S1(refine(f1)) -> likewise f2;
 //   S2(refine(f2)) -> nearest x4 of flow2 * 20 = f3; SD(x) -> nearest x4 of flow2 / 20 = f4

@@ -1,5 +1,5 @@
 // The four sub-networks of FlowNet2 (Ilg et al. 2017) as NVIDIA/flownet2-pytorch with
-// batchNorm=False: FlowNetC, FlowNetS, FlowNetSD and FlowNetFusion. Layer table: shared/MODELS.md.
+// batchNorm=False: FlowNetC, FlowNetS, FlowNetSD and FlowNetFusion. Layer table: docs/models.md section 5.
 // Every conv has a bias and is followed by LeakyReLU(0.1) except predict_flow*, inter_conv*
 // and upsampled_flow* (no activation). Parameter names follow the upstream state_dict
 // ("conv1.0.weight", "deconv5.0.bias", "inter_conv5.0.weight", "predict_flow6.weight",

@@ -10,7 +10,7 @@ namespace cvd {
 
 namespace {
 
-// inc(in, [c0 | k:a->b, ...]) of MODELS.md.
+// inc(in, [c0 | k:a->b, ...]) of docs/models.md section 4.
 struct IncConfig {
   int64_t c0;
   struct Branch {

@@ -1,6 +1,6 @@
 // Mannequin Challenge hourglass depth network (Li et al. 2019, "Learning the Depths of Moving
 // People by Watching Frozen People"; checkpoint best_depth_Ours_Bilinear_inc_3_net_G.pth), the
-// network CVD fine-tunes by default. Layer table: shared/MODELS.md.
+// network CVD fine-tunes by default. Layer table: docs/models.md section 4.
 //
 // Input contract: RGB in [0, 1] (no normalisation), [N, 3, H, W] with H and W multiples of 16.
 // Output: log depth [N, 1, H, W] (depth = exp). The confidence head (sigmoid) is built so that

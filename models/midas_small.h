@@ -1,6 +1,6 @@
 // MiDaS v2.1 small: MidasNet_small(features=64, backbone="efficientnet_lite3", expand=True) with
 // the tf_efficientnet_lite3 encoder (gen-efficientnet: ReLU6, no squeeze-excite, BN eps 1e-3,
-// TF "SAME" padding) and the custom fusion decoder. Layer table: shared/MODELS.md.
+// TF "SAME" padding) and the custom fusion decoder. Layer table: docs/models.md section 3.
 //
 // Input contract: RGB in [0, 1], [N, 3, H, W] with H and W multiples of 32 (native long side
 // 256); normalize_input applies the ImageNet mean / std. Output: non-negative relative inverse

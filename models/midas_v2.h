@@ -1,5 +1,5 @@
 // MiDaS v2 (Ranftl et al. 2020): MidasNet(features=256, non_negative=True) with a ResNeXt-101
-// 32x8d encoder and the RefineNet-style fusion decoder. Layer table: shared/MODELS.md.
+// 32x8d encoder and the RefineNet-style fusion decoder. Layer table: docs/models.md section 2.
 //
 // Input contract: RGB in [0, 1], [N, 3, H, W] with H and W multiples of 32; normalize_input
 // applies the ImageNet mean / std. Output: non-negative relative inverse depth [N, 1, H, W].

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Installs every Debian package cvd needs to build, test and run (DESIGN.md section 9).
+# Installs every Debian package cvd needs to build, test and run (docs/design.md 2.2).
 # Idempotent; run as root on Debian 12. Set CVD_WITH_PYTHON=1 to also install the offline
 # reference tools' packages (python3-torch etc.), which the build and tests never need.
 set -euo pipefail

@@ -3,7 +3,7 @@
 #pragma once
 #include <cstdint>
 
-#include "models/onnx_graph.h"
+#include "tools/convert/onnx_graph.h"
 
 namespace cvd::test {
 

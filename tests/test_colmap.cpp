@@ -10,9 +10,9 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "engine/error.h"
-#include "pipeline/colmap_runner.h"
-#include "pipeline/scale_calibration.h"
-#include "pipeline/trajectory_io.h"
+#include "pipeline/geometry/scale_calibration.h"
+#include "pipeline/io/trajectory_io.h"
+#include "pipeline/poses/colmap_runner.h"
 #include "test_support.h"
 
 namespace cvd {

@@ -1,4 +1,4 @@
-// The focal length from a video container's metadata (issue 11, pipeline/container_focal.h):
+// The focal length from a video container's metadata (issue 11, pipeline/poses/container_focal.h):
 // the key matching, reading a .mov / .mp4 written by ffmpeg with the QuickTime key iPhones use,
 // and `cvd run` on such a video taking its intrinsics from it (source recorded in run.json).
 // The file tests need the `ffmpeg` binary to write the videos and skip, saying so, without it.
@@ -8,9 +8,9 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
-#include "pipeline/colmap_runner.h"
-#include "pipeline/container_focal.h"
-#include "pipeline/exif_focal.h"
+#include "pipeline/poses/colmap_runner.h"
+#include "pipeline/poses/container_focal.h"
+#include "pipeline/poses/exif_focal.h"
 #include "tests/test_support.h"
 
 namespace cvd {

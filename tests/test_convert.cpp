@@ -1,4 +1,4 @@
-// ONNX -> cvd conversion (models/onnx_graph.h, models/onnx_weights.h) and the `cvd convert` /
+// ONNX -> cvd conversion (tools/convert/onnx_graph.h, tools/convert/onnx_weights.h) and the `cvd convert` /
 // `cvd depth` commands. Fixtures: tests/data/onnx/, written by tools/reference/export_onnx.py
 // (tiny-width PyTorch reference networks exported with BatchNorm kept, and PyTorch's own float64
 // outputs for the same weights).
@@ -17,12 +17,12 @@
 #include "engine/error.h"
 #include "engine/module_weights.h"
 #include "engine/ops.h"
-#include "models/onnx_weights.h"
-#include "pipeline/image_io.h"
-#include "pipeline/pfm_io.h"
-#include "pipeline/run_stages.h"
+#include "pipeline/io/image_io.h"
+#include "pipeline/io/pfm_io.h"
+#include "pipeline/run/run_stages.h"
 #include "tests/onnx_anonymize.h"
 #include "tests/test_support.h"
+#include "tools/convert/onnx_weights.h"
 
 namespace cvd {
 namespace {

@@ -1,4 +1,4 @@
-// FlowNet2 ONNX conversion (models/onnx_flownet2.h, `cvd convert --arch flownet2`).
+// FlowNet2 ONNX conversion (tools/convert/onnx_flownet2.h, `cvd convert --arch flownet2`).
 //
 // Fixture: tests/data/onnx/flownet2_tiny.onnx, written by
 // tools/reference/export_flownet2_onnx.py: the PyTorch reference FlowNet2 at width 1/32 with the
@@ -24,10 +24,10 @@
 #include "engine/error.h"
 #include "engine/module_weights.h"
 #include "engine/ops.h"
-#include "models/onnx_flownet2.h"
-#include "pipeline/flow_io.h"
+#include "pipeline/io/flow_io.h"
 #include "tests/onnx_anonymize.h"
 #include "tests/test_support.h"
+#include "tools/convert/onnx_flownet2.h"
 
 namespace cvd {
 namespace {

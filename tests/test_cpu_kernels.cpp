@@ -15,7 +15,7 @@
 #include <string>
 #include <vector>
 
-#include "kernels/kernel_params.h"
+#include "engine/kernel_params.h"
 #include "tests/cpu_kernel_comparison.h"
 
 namespace cvd {

@@ -11,15 +11,15 @@
 #include <random>
 
 #include "engine/error.h"
-#include "pipeline/eval_consistency.h"
-#include "pipeline/eval_depth_metrics.h"
-#include "pipeline/eval_pose_metrics.h"
-#include "pipeline/eval_readers.h"
-#include "pipeline/eval_report.h"
-#include "pipeline/eval_run.h"
-#include "pipeline/image_io.h"
-#include "pipeline/pfm_io.h"
-#include "pipeline/trajectory_io.h"
+#include "pipeline/eval/eval_consistency.h"
+#include "pipeline/eval/eval_depth_metrics.h"
+#include "pipeline/eval/eval_pose_metrics.h"
+#include "pipeline/eval/eval_readers.h"
+#include "pipeline/eval/eval_report.h"
+#include "pipeline/eval/eval_run.h"
+#include "pipeline/io/image_io.h"
+#include "pipeline/io/pfm_io.h"
+#include "pipeline/io/trajectory_io.h"
 #include "tests/test_support.h"
 
 namespace fs = std::filesystem;

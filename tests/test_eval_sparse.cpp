@@ -5,7 +5,7 @@
 #include <fstream>
 
 #include "engine/error.h"
-#include "pipeline/eval_sparse.h"
+#include "pipeline/eval/eval_sparse.h"
 #include "test_support.h"
 
 namespace cvd {

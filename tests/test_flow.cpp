@@ -12,13 +12,13 @@
 #include <vector>
 
 #include "engine/error.h"
-#include "pipeline/flow_consistency.h"
-#include "pipeline/flow_dis.h"
-#include "pipeline/flow_epe.h"
-#include "pipeline/flow_homography.h"
-#include "pipeline/flow_io.h"
-#include "pipeline/flow_pair.h"
-#include "pipeline/flow_visualize.h"
+#include "pipeline/flow/flow_consistency.h"
+#include "pipeline/flow/flow_dis.h"
+#include "pipeline/flow/flow_epe.h"
+#include "pipeline/flow/flow_homography.h"
+#include "pipeline/flow/flow_pair.h"
+#include "pipeline/flow/flow_visualize.h"
+#include "pipeline/io/flow_io.h"
 #include "tests/flow_test_images.h"
 #include "tests/test_support.h"
 

@@ -8,8 +8,8 @@
 #include <string>
 #include <vector>
 
-#include "pipeline/flow_epe.h"
-#include "pipeline/flow_io.h"
+#include "pipeline/flow/flow_epe.h"
+#include "pipeline/io/flow_io.h"
 #include "tests/flow_test_images.h"
 #include "tests/test_support.h"
 

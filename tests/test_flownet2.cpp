@@ -21,8 +21,8 @@
 #include "engine/module_weights.h"
 #include "engine/ops.h"
 #include "models/flownet2.h"
-#include "pipeline/flow_flownet2.h"
-#include "pipeline/flow_io.h"
+#include "pipeline/flow/flow_flownet2.h"
+#include "pipeline/io/flow_io.h"
 #include "tests/test_support.h"
 
 namespace cvd {

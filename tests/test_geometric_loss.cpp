@@ -8,7 +8,7 @@
 
 #include "engine/autograd.h"
 #include "engine/ops.h"
-#include "pipeline/geometric_loss.h"
+#include "pipeline/training/geometric_loss.h"
 #include "tests/test_support.h"
 
 namespace cvd {

@@ -16,13 +16,13 @@
 #include <random>
 
 #include "engine/error.h"
-#include "pipeline/colmap_runner.h"
-#include "pipeline/eval_depth_metrics.h"
-#include "pipeline/exif_focal.h"
-#include "pipeline/intrinsics_colmap_database.h"
-#include "pipeline/intrinsics_focal_search.h"
-#include "pipeline/run_pipeline.h"
-#include "pipeline/synthetic_scene.h"
+#include "pipeline/eval/eval_depth_metrics.h"
+#include "pipeline/poses/colmap_runner.h"
+#include "pipeline/poses/exif_focal.h"
+#include "pipeline/poses/intrinsics_colmap_database.h"
+#include "pipeline/poses/intrinsics_focal_search.h"
+#include "pipeline/run/run_pipeline.h"
+#include "scene/synthetic_scene.h"
 #include "test_support.h"
 
 namespace cvd {

@@ -20,12 +20,12 @@
 
 #include "engine/compute_precision.h"
 #include "engine/dispatch.h"
+#include "engine/kernel_params.h"
 #include "engine/random.h"
 #include "engine/tensor.h"
 #include "kernels/cpu/depthwise_conv2d.h"
 #include "kernels/cpu/onednn_context.h"
 #include "kernels/cpu/onednn_conv_family.h"
-#include "kernels/kernel_params.h"
 #include "tests/test_support.h"
 
 namespace cvd {

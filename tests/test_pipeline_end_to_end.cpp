@@ -5,10 +5,10 @@
 
 #include <opencv2/imgproc.hpp>
 
-#include "pipeline/eval_depth_metrics.h"
-#include "pipeline/pfm_io.h"
-#include "pipeline/run_pipeline.h"
-#include "pipeline/synthetic_scene.h"
+#include "pipeline/eval/eval_depth_metrics.h"
+#include "pipeline/io/pfm_io.h"
+#include "pipeline/run/run_pipeline.h"
+#include "scene/synthetic_scene.h"
 #include "test_support.h"
 
 namespace cvd {

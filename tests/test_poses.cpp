@@ -9,9 +9,9 @@
 #include <set>
 
 #include "engine/error.h"
-#include "pipeline/pair_sampling.h"
-#include "pipeline/scale_calibration.h"
-#include "pipeline/trajectory_io.h"
+#include "pipeline/flow/pair_sampling.h"
+#include "pipeline/geometry/scale_calibration.h"
+#include "pipeline/io/trajectory_io.h"
 #include "test_support.h"
 
 namespace cvd {

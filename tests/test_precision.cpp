@@ -15,7 +15,7 @@
 #include "engine/error.h"
 #include "engine/random.h"
 #include "models/depth_net.h"
-#include "pipeline/pfm_io.h"
+#include "pipeline/io/pfm_io.h"
 #include "tests/test_support.h"
 
 namespace cvd {

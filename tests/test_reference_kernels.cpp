@@ -20,8 +20,8 @@
 #include <vector>
 
 #include "engine/dispatch.h"
+#include "engine/kernel_params.h"
 #include "engine/tensor.h"
-#include "kernels/kernel_params.h"
 
 namespace cvd {
 namespace {

@@ -20,7 +20,7 @@
 #include <nlohmann/json.hpp>
 #include <thread>
 
-#include "pipeline/pfm_io.h"
+#include "pipeline/io/pfm_io.h"
 #include "tests/test_support.h"
 
 namespace cvd::test {

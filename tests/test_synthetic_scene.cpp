@@ -1,4 +1,4 @@
-// The built-in synthetic scene (pipeline/synthetic_scene.h), its files, and the PFM / image IO it
+// The built-in synthetic scene (scene/synthetic_scene.h), its files, and the PFM / image IO it
 // shares with the pipeline.
 #include <gtest/gtest.h>
 
@@ -13,9 +13,9 @@
 #include <limits>
 
 #include "engine/error.h"
-#include "pipeline/image_io.h"
-#include "pipeline/pfm_io.h"
-#include "pipeline/synthetic_scene.h"
+#include "pipeline/io/image_io.h"
+#include "pipeline/io/pfm_io.h"
+#include "scene/synthetic_scene.h"
 #include "test_support.h"
 
 namespace cvd {

@@ -8,7 +8,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "engine/error.h"
-#include "pipeline/user_masks.h"
+#include "pipeline/flow/user_masks.h"
 #include "tests/test_support.h"
 
 namespace cvd::test {

@@ -19,10 +19,8 @@
 
 #include "cvd/export.h"
 
-// The library's own sources define the same two types in engine/error.h (token for token, with the
-// internal fail()/CVD_CHECK helpers around them); a translation unit that already has them skips
-// this copy. Consumers of the installed package only ever see this one.
-#ifndef CVD_CHECK
+// The library's own sources use these two types too (engine/error.h adds its fail() and CVD_CHECK
+// helpers around this header).
 namespace cvd {
 
 /// What kind of failure a cvd::Error reports (see the table at the top of cvd/error.h).
@@ -53,4 +51,3 @@ class Error : public std::runtime_error {
 };
 
 }  // namespace cvd
-#endif

@@ -2,10 +2,10 @@
 // views with the output's shape and any strides (0 where broadcast). The dims are coalesced
 // (kernels/cpu/cpu_strided_rows.h) and each row runs a loop specialised for its input strides:
 // contiguous, scalar (stride 0) or general.
+#include "engine/elementwise_math.h"
 #include "kernels/cpu/cpu_op_switch.h"
 #include "kernels/cpu/cpu_openmp_families.h"
 #include "kernels/cpu/cpu_strided_rows.h"
-#include "kernels/elementwise_math.h"
 
 namespace cvd::cpu {
 

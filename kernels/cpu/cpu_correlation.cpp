@@ -1,5 +1,5 @@
 // OpenMP f32 kernels of FlowNet's correlation and ChannelNorm (semantics in
-// kernels/kernel_params.h, CorrelationParams), forward and backward.
+// engine/kernel_params.h, CorrelationParams), forward and backward.
 //   correlation forward: parallel over output rows (image, oy); for each displacement the row is
 //     accumulated in a local buffer over channels and kernel offsets as row-times-row products
 //     (contiguous in x when stride1 == 1, so the inner loop vectorises), with the range of
@@ -13,8 +13,8 @@
 #include <vector>
 
 #include "engine/dispatch.h"
+#include "engine/kernel_params.h"
 #include "kernels/cpu/cpu_parallel.h"
-#include "kernels/kernel_params.h"
 
 namespace cvd::cpu {
 

@@ -4,9 +4,9 @@
 #include <cstring>
 #include <vector>
 
+#include "engine/kernel_params.h"
 #include "kernels/cpu/cpu_openmp_families.h"
 #include "kernels/cpu/cpu_parallel.h"
-#include "kernels/kernel_params.h"
 
 namespace cvd::cpu {
 

@@ -2,7 +2,7 @@
 // so the element loops of the OpenMP kernels inline one case of the shared math and vectorise.
 // Usage: with_unary_op(op, [&]<UnaryOp OP>() { ... });
 #pragma once
-#include "kernels/kernel_params.h"
+#include "engine/kernel_params.h"
 
 namespace cvd::cpu {
 

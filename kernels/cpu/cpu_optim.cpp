@@ -1,11 +1,11 @@
 // OpenMP f32 kernels of the optimiser steps (PyTorch torch.optim.Adam and SGD), updating the
 // parameter and its state in place. The per-element math is the shared
-// kernels/elementwise_math.h; the per-step scalars are computed once in double.
+// engine/elementwise_math.h; the per-step scalars are computed once in double.
 #include <cmath>
 
+#include "engine/elementwise_math.h"
 #include "kernels/cpu/cpu_openmp_families.h"
 #include "kernels/cpu/cpu_parallel.h"
-#include "kernels/elementwise_math.h"
 
 namespace cvd::cpu {
 

@@ -1,14 +1,14 @@
 // OpenMP f32 kernels of the contiguous element-wise ops: copy (from any strides, to f32 or f64),
-// fill, unary, unary_backward. The math is the shared kernels/elementwise_math.h.
+// fill, unary, unary_backward. The math is the shared engine/elementwise_math.h.
 #include <algorithm>
 #include <cstring>
 #include <type_traits>
 
+#include "engine/elementwise_math.h"
 #include "kernels/cpu/cpu_op_switch.h"
 #include "kernels/cpu/cpu_openmp_families.h"
 #include "kernels/cpu/cpu_parallel.h"
 #include "kernels/cpu/cpu_strided_rows.h"
-#include "kernels/elementwise_math.h"
 
 namespace cvd::cpu {
 

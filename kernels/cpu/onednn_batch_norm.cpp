@@ -8,10 +8,10 @@
 #include <cstring>
 
 #include "engine/error.h"
+#include "engine/kernel_params.h"
 #include "kernels/cpu/cpu_parallel.h"
 #include "kernels/cpu/onednn_context.h"
 #include "kernels/cpu/onednn_kernels.h"
-#include "kernels/kernel_params.h"
 
 namespace cvd::onednn {
 

@@ -144,11 +144,8 @@ void fail_onednn(OpId op, const dnnl::error& e) {
 
 int onednn_threads() { return omp_in_parallel() ? 1 : omp_get_max_threads(); }
 
-}  // namespace cvd::onednn
-
-namespace cvd {
-
-// engine/compute_precision.h: bf16 support is what oneDNN's effective ISA offers.
+// The bf16 hooks of the CPU backend (engine/compute_precision.h): what oneDNN's effective ISA
+// offers.
 std::string bf16_unit() {
   const dnnl::cpu_isa isa = dnnl::get_effective_cpu_isa();
   if (isa == dnnl::cpu_isa::avx512_core_amx) return "AMX";
@@ -167,4 +164,4 @@ bool bf16_supported(std::string* why) {
   return false;
 }
 
-}  // namespace cvd
+}  // namespace cvd::onednn

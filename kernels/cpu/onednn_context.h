@@ -7,6 +7,7 @@
 // sequentially); the caches are guarded by a mutex so that concurrent calls stay memory safe.
 #pragma once
 #include <oneapi/dnnl/dnnl.hpp>
+#include <string>
 
 #include <cstdint>
 #include <functional>
@@ -150,5 +151,11 @@ void guarded(const KernelArgs& a) {
 // The number of OpenMP threads oneDNN will use; part of every key, since primitives are tuned
 // for the thread count at creation.
 int onednn_threads();
+
+// The CPU backend's bf16 hooks (kernels/cpu/cpu_backend.h): the fastest bf16 unit oneDNN's
+// effective ISA offers ("AMX", "AVX512-BF16" or "none"), and whether there is one (`why` says what
+// the CPU offers when not).
+std::string bf16_unit();
+bool bf16_supported(std::string* why);
 
 }  // namespace cvd::onednn

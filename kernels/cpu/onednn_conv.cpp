@@ -5,11 +5,11 @@
 #include <cstring>
 
 #include "engine/error.h"
+#include "engine/kernel_params.h"
 #include "kernels/cpu/cpu_parallel.h"
 #include "kernels/cpu/depthwise_conv2d.h"
 #include "kernels/cpu/onednn_conv_family.h"
 #include "kernels/cpu/onednn_kernels.h"
-#include "kernels/kernel_params.h"
 
 namespace cvd::onednn {
 

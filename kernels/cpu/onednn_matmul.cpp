@@ -3,9 +3,9 @@
 #include <cstring>
 
 #include "engine/error.h"
+#include "engine/kernel_params.h"
 #include "kernels/cpu/onednn_context.h"
 #include "kernels/cpu/onednn_kernels.h"
-#include "kernels/kernel_params.h"
 
 namespace cvd::onednn {
 

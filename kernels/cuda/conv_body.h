@@ -7,9 +7,9 @@
 // correct everywhere, not tuned (an im2col + cuBLAS / cuDNN path is future work).
 #pragma once
 #include "engine/dispatch.h"
+#include "engine/kernel_params.h"
 #include "kernels/cuda/launch_body.h"
 #include "kernels/cuda/layout_body.h"
-#include "kernels/kernel_params.h"
 
 namespace cvd::cuda {
 

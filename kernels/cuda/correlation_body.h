@@ -1,14 +1,14 @@
 // CUDA kernel bodies and op drivers of FlowNetC correlation and ChannelNorm, forward and backward
-// (semantics in kernels/kernel_params.h, CorrelationParams). The correlation forward is a gather
+// (semantics in engine/kernel_params.h, CorrelationParams). The correlation forward is a gather
 // (one thread per output element); its backward runs one thread per output element too and
 // scatters into ga / gb with atomic_add (zeroed first).
 #pragma once
 #include <cmath>
 
 #include "engine/dispatch.h"
+#include "engine/kernel_params.h"
 #include "kernels/cuda/launch_body.h"
 #include "kernels/cuda/resample_body.h"
-#include "kernels/kernel_params.h"
 
 namespace cvd::cuda {
 

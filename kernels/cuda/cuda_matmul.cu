@@ -4,8 +4,8 @@
 
 #include <mutex>
 
+#include "engine/kernel_params.h"
 #include "kernels/cuda/device_launch.cuh"
-#include "kernels/kernel_params.h"
 
 namespace cvd::cuda {
 

@@ -8,8 +8,8 @@
 #include <string>
 #include <vector>
 
-#include "engine/backend_info.h"
 #include "engine/dispatch.h"
+#include "kernels/cuda/cuda_backend.h"
 #include "kernels/cuda/device_launch.cuh"
 
 namespace cvd {
@@ -134,12 +134,14 @@ cudaStream_t engine_stream() {
 
 }  // namespace cuda
 
-int cuda_device_count() { return cuda_state().count; }
-std::string cuda_runtime_status() { return cuda_state().status; }
+namespace {
+
+int device_count() { return cuda_state().count; }
+std::string runtime_status() { return cuda_state().status; }
 
 // Copies through the engine stream and waits for it, so the result is complete on return (host
 // memory is pageable; the copy is synchronous with respect to the host either way).
-Tensor device_copy(const Tensor& x, Device d) {
+Tensor copy_between_devices(const Tensor& x, Device d) {
   CVD_CHECK(x.is_contiguous(), "device_copy needs a contiguous tensor, got {}", x.str());
   if (d.is_cuda() || x.device().is_cuda()) require_gpu("copying a tensor to or from CUDA");
   Tensor y = Tensor::empty(x.shape(), x.dtype(), d);
@@ -167,6 +169,20 @@ void register_cuda_kernels(KernelRegistry& r) {
   cuda::register_cuda_conv(r);
   cuda::register_cuda_matmul(r);
   cuda::register_cuda_correlation(r);
+}
+
+}  // namespace
+
+BackendHooks cuda_backend() {
+  BackendHooks b;
+  b.name = "cuda";
+  b.description = "cuda (f32)";
+  b.register_kernels = &register_cuda_kernels;
+  b.device = DeviceType::cuda;
+  b.device_copy = &copy_between_devices;
+  b.device_count = &device_count;
+  b.runtime_status = &runtime_status;
+  return b;
 }
 
 }  // namespace cvd

@@ -7,9 +7,9 @@
 #pragma once
 #include <cstdint>
 
+#include "engine/elementwise_math.h"
 #include "engine/error.h"
 #include "engine/tensor.h"
-#include "kernels/elementwise_math.h"
 
 namespace cvd::cuda {
 

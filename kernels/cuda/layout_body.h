@@ -6,8 +6,8 @@
 #include <vector>
 
 #include "engine/dispatch.h"
+#include "engine/kernel_params.h"
 #include "kernels/cuda/launch_body.h"
-#include "kernels/kernel_params.h"
 
 namespace cvd::cuda {
 

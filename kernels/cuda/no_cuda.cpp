@@ -1,19 +1,35 @@
 // Built when the CUDA toolkit is absent: the CUDA backend registers no kernels and reports no
 // devices; asking for a CUDA tensor is a clear Error(unsupported).
-#include "engine/backend_info.h"
-#include "engine/dispatch.h"
+#include "engine/error.h"
+#include "kernels/cuda/cuda_backend.h"
 
 namespace cvd {
 
-void register_cuda_kernels(KernelRegistry&) {}
+namespace {
 
-int cuda_device_count() { return 0; }
+void register_no_kernels(KernelRegistry&) {}
 
-std::string cuda_runtime_status() { return "not compiled in (no nvcc at build time)"; }
+int no_devices() { return 0; }
 
-Tensor device_copy(const Tensor& x, Device d) {
+std::string not_compiled() { return "not compiled in (no nvcc at build time)"; }
+
+Tensor refuse_copy(const Tensor& x, Device d) {
   fail(ErrorCategory::unsupported, "cannot copy {} to {}: this build has no CUDA backend", x.str(),
        d.str());
+}
+
+}  // namespace
+
+BackendHooks cuda_backend() {
+  BackendHooks b;
+  b.name = "cuda";
+  b.description = "cuda: not compiled in";
+  b.register_kernels = &register_no_kernels;
+  b.device = DeviceType::cuda;
+  b.device_copy = &refuse_copy;
+  b.device_count = &no_devices;
+  b.runtime_status = &not_compiled;
+  return b;
 }
 
 }  // namespace cvd

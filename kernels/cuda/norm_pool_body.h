@@ -8,8 +8,8 @@
 #include <cmath>
 
 #include "engine/dispatch.h"
+#include "engine/kernel_params.h"
 #include "kernels/cuda/launch_body.h"
-#include "kernels/kernel_params.h"
 
 namespace cvd::cuda {
 

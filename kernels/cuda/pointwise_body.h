@@ -1,10 +1,10 @@
 // CUDA kernel bodies and op drivers of the element-wise ops: copy (strided source, f32 <-> f64),
 // fill, unary, unary_backward, binary and where (broadcast views), adam_update, sgd_update.
-// One thread per output element; the math is kernels/elementwise_math.h, shared with the CPU.
+// One thread per output element; the math is engine/elementwise_math.h, shared with the CPU.
 #pragma once
 #include "engine/dispatch.h"
+#include "engine/kernel_params.h"
 #include "kernels/cuda/launch_body.h"
-#include "kernels/kernel_params.h"
 
 namespace cvd::cuda {
 

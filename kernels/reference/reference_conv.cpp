@@ -6,7 +6,7 @@
 //      in_pos  = out_pos * stride - pad_before + tap * dilation   (convolution),
 // and each backward kernel visits exactly the same triples as its forward, so every gradient is
 // the adjoint of its forward by construction.
-#include "kernels/kernel_params.h"
+#include "engine/kernel_params.h"
 #include "kernels/reference/reference_access.h"
 #include "kernels/reference/reference_kernels.h"
 

@@ -1,9 +1,9 @@
 // Reference kernels of FlowNet's correlation and ChannelNorm (semantics in
-// kernels/kernel_params.h, CorrelationParams), forward and backward, as plain float64 loops over
+// engine/kernel_params.h, CorrelationParams), forward and backward, as plain float64 loops over
 // the definition: every backward scatters through exactly the products of its forward.
 #include <cmath>
 
-#include "kernels/kernel_params.h"
+#include "engine/kernel_params.h"
 #include "kernels/reference/reference_access.h"
 #include "kernels/reference/reference_kernels.h"
 

@@ -1,7 +1,7 @@
 // The float64 reference kernels (the oracle every fast kernel is checked against): plain loops in
 // double, written for clarity rather than speed. Registered for (op, cpu, f64) by
 // register_reference_kernels (register_reference.cpp). The kernel contract is in engine/dispatch.h
-// and the per-op semantics in kernels/kernel_params.h.
+// and the per-op semantics in engine/kernel_params.h.
 #pragma once
 #include <cstdint>
 

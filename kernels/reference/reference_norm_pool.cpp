@@ -4,7 +4,7 @@
 #include <cmath>
 #include <limits>
 
-#include "kernels/kernel_params.h"
+#include "engine/kernel_params.h"
 #include "kernels/reference/reference_access.h"
 #include "kernels/reference/reference_kernels.h"
 

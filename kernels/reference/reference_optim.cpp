@@ -3,7 +3,7 @@
 // in place and leave the gradient untouched.
 #include <cmath>
 
-#include "kernels/kernel_params.h"
+#include "engine/kernel_params.h"
 #include "kernels/reference/reference_access.h"
 #include "kernels/reference/reference_kernels.h"
 

@@ -1,7 +1,7 @@
 // Reference kernels of the element-wise ops: unary, unary_backward, binary, where. The math is the
-// shared kernels/elementwise_math.h, evaluated in double.
-#include "kernels/elementwise_math.h"
-#include "kernels/kernel_params.h"
+// shared engine/elementwise_math.h, evaluated in double.
+#include "engine/elementwise_math.h"
+#include "engine/kernel_params.h"
 #include "kernels/reference/reference_access.h"
 #include "kernels/reference/reference_kernels.h"
 

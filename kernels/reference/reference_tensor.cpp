@@ -1,7 +1,7 @@
 // Reference kernels of the tensor plumbing ops: copy, fill, reduce_sum, concat, pad, matmul.
 #include <vector>
 
-#include "kernels/kernel_params.h"
+#include "engine/kernel_params.h"
 #include "kernels/reference/reference_access.h"
 #include "kernels/reference/reference_kernels.h"
 

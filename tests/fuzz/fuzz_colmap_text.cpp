@@ -1,9 +1,9 @@
-// libFuzzer target: the COLMAP text model reader (pipeline/trajectory_io.cpp). One input holds
+// libFuzzer target: the COLMAP text model reader (pipeline/io/trajectory_io.cpp). One input holds
 // the three files, separated by lines "@@images" and "@@points": cameras.txt first, then
 // images.txt, then points3D.txt (absent when there is no "@@points" line).
 #include <string>
 
-#include "pipeline/trajectory_io.h"
+#include "pipeline/io/trajectory_io.h"
 #include "tests/fuzz/fuzz_support.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

@@ -1,5 +1,5 @@
-// libFuzzer target: the Middlebury .flo reader (pipeline/flow_io.cpp).
-#include "pipeline/flow_io.h"
+// libFuzzer target: the Middlebury .flo reader (pipeline/io/flow_io.cpp).
+#include "pipeline/io/flow_io.h"
 #include "tests/fuzz/fuzz_support.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

@@ -1,5 +1,5 @@
-// libFuzzer target: the intrinsics JSON reader (pipeline/trajectory_io.cpp).
-#include "pipeline/trajectory_io.h"
+// libFuzzer target: the intrinsics JSON reader (pipeline/io/trajectory_io.cpp).
+#include "pipeline/io/trajectory_io.h"
 #include "tests/fuzz/fuzz_support.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

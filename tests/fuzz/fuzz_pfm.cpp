@@ -1,5 +1,5 @@
-// libFuzzer target: the PFM reader (pipeline/pfm_io.cpp).
-#include "pipeline/pfm_io.h"
+// libFuzzer target: the PFM reader (pipeline/io/pfm_io.cpp).
+#include "pipeline/io/pfm_io.h"
 #include "tests/fuzz/fuzz_support.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

@@ -18,20 +18,21 @@ TARGETS=("$@")
 [ ${#TARGETS[@]} -eq 0 ] && TARGETS=("${ALL_TARGETS[@]}")
 
 FLAGS=(-std=c++20 -g -O1 -fno-omit-frame-pointer -fsanitize=address,undefined
-       -fno-sanitize-recover=undefined -I"$ROOT" -isystem /usr/include/eigen3
+       -fno-sanitize-recover=undefined -I"$ROOT" -I"$ROOT/include" -isystem /usr/include/eigen3
        -isystem /usr/include/opencv4 -DCVD_VERSION=\"fuzz\" -DFMT_SHARED -DSPDLOG_COMPILED_LIB
        -DSPDLOG_FMT_EXTERNAL -DSPDLOG_SHARED_LIB -Wno-unknown-pragmas)
 LIBS=(-lopencv_core -lfmt -lspdlog -lz -lpthread)
 
-# The sources each target needs (the .cvdw reader needs the tensor engine).
+# The sources each target needs (the .cvdw and ONNX readers need the tensor engine, which links
+# without any backend: cvd_engine depends on no other layer).
 sources_for() {
   case $1 in
-    pfm) echo engine/error.cpp pipeline/atomic_file.cpp pipeline/pfm_io.cpp ;;
-    flo) echo engine/error.cpp pipeline/atomic_file.cpp pipeline/flow_io.cpp ;;
-    onnx) echo models/onnx_graph.cpp tests/fuzz/fuzz_without_kernels.cpp; (cd "$ROOT" && ls engine/*.cpp | tr '\n' ' ') ;;
+    pfm) echo engine/error.cpp pipeline/io/atomic_file.cpp pipeline/io/pfm_io.cpp ;;
+    flo) echo engine/error.cpp pipeline/io/atomic_file.cpp pipeline/io/flow_io.cpp ;;
+    onnx) echo tools/convert/onnx_graph.cpp; (cd "$ROOT" && ls engine/*.cpp | tr '\n' ' ') ;;
     tum | kitti | intrinsics_json | colmap_text)
-      echo engine/error.cpp pipeline/atomic_file.cpp pipeline/trajectory_io.cpp ;;
-    cvdw) echo tests/fuzz/fuzz_without_kernels.cpp; (cd "$ROOT" && ls engine/*.cpp | tr '\n' ' ') ;;
+      echo engine/error.cpp pipeline/io/atomic_file.cpp pipeline/io/trajectory_io.cpp ;;
+    cvdw) (cd "$ROOT" && ls engine/*.cpp | tr '\n' ' ') ;;
   esac
 }
 
@@ -59,7 +60,7 @@ for t in "${TARGETS[@]}"; do
   objs=()
   for s in $(sources_for "$t") tests/fuzz/fuzz_$t.cpp; do objs+=("$(object_for "$s")"); done
   extra=()
-  case $t in cvdw | onnx) extra=(-fopenmp -ldnnl) ;; esac
+  case $t in cvdw | onnx) extra=(-fopenmp) ;; esac
   "$CXX" "${FLAGS[@]}" -fsanitize=fuzzer "${objs[@]}" "${LIBS[@]}" "${extra[@]}" -o "$BUILD/fuzz_$t"
 done
 

@@ -1,6 +1,6 @@
 // `cvd convert MODEL.onnx --arch midas_v2|midas_small|mannequin|flownet2 [--width W] -o
 // MODEL.cvdw`: converts the weights of an ONNX export of a depth network or of FlowNet2 (custom
-// ops in domain cvd.flownet2, models/onnx_flownet2.h) into cvd's weights file.
+// ops in domain cvd.flownet2, tools/convert/onnx_flownet2.h) into cvd's weights file.
 #include <fmt/format.h>
 
 #include <filesystem>
@@ -8,9 +8,9 @@
 
 #include "engine/error.h"
 #include "engine/module_weights.h"
-#include "models/onnx_flownet2.h"
-#include "models/onnx_weights.h"
 #include "tools/cli/command.h"
+#include "tools/convert/onnx_flownet2.h"
+#include "tools/convert/onnx_weights.h"
 
 namespace cvd::cli {
 namespace {

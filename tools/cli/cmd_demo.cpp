@@ -6,14 +6,14 @@
 #include <fstream>
 #include <opencv2/imgproc.hpp>
 
-#include "pipeline/atomic_file.h"
-#include "pipeline/colmap_runner.h"
-#include "pipeline/eval_depth_metrics.h"
-#include "pipeline/eval_run.h"
-#include "pipeline/image_io.h"
-#include "pipeline/pfm_io.h"
-#include "pipeline/run_pipeline.h"
-#include "pipeline/synthetic_scene.h"
+#include "pipeline/eval/eval_depth_metrics.h"
+#include "pipeline/eval/eval_run.h"
+#include "pipeline/io/atomic_file.h"
+#include "pipeline/io/image_io.h"
+#include "pipeline/io/pfm_io.h"
+#include "pipeline/poses/colmap_runner.h"
+#include "pipeline/run/run_pipeline.h"
+#include "scene/synthetic_scene.h"
 #include "tools/cli/command.h"
 #include "tools/cli/progress_bar.h"
 #include "tools/cli/run_flags.h"

@@ -22,11 +22,11 @@
 #include "engine/module_weights.h"
 #include "engine/ops.h"
 #include "models/depth_net.h"
-#include "pipeline/frame_source.h"
-#include "pipeline/image_io.h"
-#include "pipeline/pfm_io.h"
-#include "pipeline/run_outputs.h"
-#include "pipeline/run_stages.h"
+#include "pipeline/io/frame_source.h"
+#include "pipeline/io/image_io.h"
+#include "pipeline/io/pfm_io.h"
+#include "pipeline/run/run_outputs.h"
+#include "pipeline/run/run_stages.h"
 #include "tools/cli/command.h"
 
 namespace cvd::cli {

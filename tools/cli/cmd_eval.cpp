@@ -4,7 +4,7 @@
 
 #include <memory>
 
-#include "pipeline/eval_run.h"
+#include "pipeline/eval/eval_run.h"
 #include "tools/cli/command.h"
 
 namespace cvd::cli {

@@ -10,13 +10,13 @@
 #include <string>
 
 #include "engine/error.h"
-#include "pipeline/flow_dis.h"
-#include "pipeline/flow_epe.h"
-#include "pipeline/flow_flownet2.h"
-#include "pipeline/flow_io.h"
-#include "pipeline/flow_pair.h"
-#include "pipeline/flow_visualize.h"
-#include "pipeline/image_io.h"
+#include "pipeline/flow/flow_dis.h"
+#include "pipeline/flow/flow_epe.h"
+#include "pipeline/flow/flow_flownet2.h"
+#include "pipeline/flow/flow_pair.h"
+#include "pipeline/flow/flow_visualize.h"
+#include "pipeline/io/flow_io.h"
+#include "pipeline/io/image_io.h"
 #include "tools/cli/command.h"
 
 namespace cvd::cli {

@@ -4,8 +4,8 @@
 #include <spdlog/spdlog.h>
 
 #include "engine/error.h"
-#include "pipeline/eval_run.h"
-#include "pipeline/run_pipeline.h"
+#include "pipeline/eval/eval_run.h"
+#include "pipeline/run/run_pipeline.h"
 #include "tools/cli/command.h"
 #include "tools/cli/progress_bar.h"
 #include "tools/cli/run_flags.h"

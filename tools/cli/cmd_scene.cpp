@@ -1,11 +1,11 @@
-// `cvd scene`: renders the built-in synthetic scene (pipeline/synthetic_scene.h) with its ground
+// `cvd scene`: renders the built-in synthetic scene (scene/synthetic_scene.h) with its ground
 // truth into a folder, e.g. to try the pipeline or to build test fixtures.
 #include <fmt/format.h>
 
 #include <chrono>
 #include <memory>
 
-#include "pipeline/synthetic_scene.h"
+#include "scene/synthetic_scene.h"
 #include "tools/cli/command.h"
 
 namespace cvd::cli {

@@ -7,6 +7,7 @@
 
 #include "engine/backend_info.h"
 #include "engine/error.h"
+#include "kernels/builtin_backends.h"
 #include "tools/cli/command.h"
 
 namespace cvd::cli {
@@ -51,6 +52,7 @@ static int exit_code_for(ErrorCategory c) {
 
 int main(int argc, char** argv) {
   using namespace cvd::cli;
+  cvd::register_builtin_backends();
   CLI::App app{"cvd: consistent video depth (Luo et al. 2020) in native C++"};
   app.require_subcommand(1);
   // --version: the build's backends and the devices usable now (a missing GPU is not an error).

@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "engine/error.h"
+#include "models/depth_net.h"
 #include "tools/cli/command.h"
 
 namespace cvd::cli {
@@ -21,7 +22,7 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s) {
       "--model", o.model,
       "Converted depth network (.cvdw, see `cvd convert`); default: an untrained network");
   c->add_option("--arch", o.arch, "Architecture of the default network")
-      ->check(CLI::IsMember({"mannequin", "midas_small", "midas_v2"}));
+      ->check(CLI::IsMember(cvd::depth_net_archs()));
   c->add_option("--width", o.width, "Width multiplier of the default network");
   c->add_option("--poses", o.poses_file, "Camera poses file instead of running COLMAP");
   c->add_option("--poses-format", o.poses_format, "Format of --poses")

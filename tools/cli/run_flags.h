@@ -4,7 +4,7 @@
 
 #include <string>
 
-#include "pipeline/run_options.h"
+#include "pipeline/run/run_options.h"
 
 namespace cvd::cli {
 

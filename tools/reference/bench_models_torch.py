@@ -70,7 +70,7 @@ def bench_pairs(batch, h, w):
 
 
 def loss_direction(d_i, d_j, cam, lam):
-    """pipeline/geometric_loss.h, one direction: mean reprojection distance to the flow target +
+    """pipeline/training/geometric_loss.h, one direction: mean reprojection distance to the flow target +
     lambda * mean focal-weighted disparity difference (D_j sampled bilinearly, border), masked."""
     R_i, t_i, R_j, t_j, K, flow, mask = cam
     h, w = d_i.shape
@@ -104,7 +104,7 @@ def geometric_loss(arch, depth, pairs):
 
 
 def forward_gmac(arch, model, h, w):
-    """Multiply-accumulates of convolutions of one forward per image (what MODELS.md counts)."""
+    """Multiply-accumulates of convolutions of one forward per image (what docs/models.md section 8 counts)."""
     macs = [0]
 
     def hook(m, inp, out):

@@ -1,5 +1,5 @@
 """FlowNet2 (Ilg et al. 2017) as in NVIDIA/flownet2-pytorch (models.FlowNet2, batchNorm=False,
-div_flow 20, rgb_max 255), written from the facts of shared/MODELS.md in pure PyTorch: the CUDA
+div_flow 20, rgb_max 255), written from the facts of docs/models.md section 5 in pure PyTorch: the CUDA
 Correlation, Resample2d and ChannelNorm packages are replaced by the equivalent torch code below.
 Module and parameter names follow the upstream state_dict ("flownetc.conv1.0.weight", ...).
 
@@ -8,7 +8,7 @@ domain "cvd.flownet2" (opset version 1), so that the graph stays small and a con
 1:1:
   Correlation(a, b) -> y    ints pad_size, kernel_size, max_displacement, stride1, stride2,
                             corr_multiply (FlowNetC: 20, 1, 20, 1, 2, 1); semantics of
-                            kernels/kernel_params.h CorrelationParams (divided by k^2 C)
+                            engine/kernel_params.h CorrelationParams (divided by k^2 C)
   Resample2d(img, flow) -> warped   int kernel_size (1); bilinear sample at (x + u, y + v) with
                             clamped indices = grid_sample(bilinear, border, align_corners=True)
   ChannelNorm(x) -> y       int norm_deg (2); sqrt(sum_c x^2), [N, C, H, W] -> [N, 1, H, W]
@@ -126,7 +126,7 @@ def export_onnx(net, path, height=384, width=512, opset=14):
 
 
 def _correlation(a, b, pad, kernel_size, max_displacement, stride1, stride2):
-    """FlowNetC correlation (see kernels/kernel_params.h, CorrelationParams): for each
+    """FlowNetC correlation (see engine/kernel_params.h, CorrelationParams): for each
     displacement (tj, ti) in [-r, r]^2, r = max_displacement // stride2, the channel mean of
     a * shifted b over the k x k patch, zero padding `pad`."""
     n, c, h, w = a.shape

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Generates tests/data/geometric_loss_fixture.json: the CVD geometric loss (DESIGN.md 6.6) on
+"""Generates tests/data/geometric_loss_fixture.json: the CVD geometric loss (docs/design.md 5.6) on
 random inputs computed by PyTorch (float64), with gradients w.r.t. both depth maps. An
 independent implementation in torch of the paper's / reference implementation's loss:
 spatial ||p_ij - f_ij||_2 and focal * |1/z_ij - 1/z_j(f_ij)|, mask-normalised means, both

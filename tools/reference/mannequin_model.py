@@ -1,5 +1,5 @@
 """PyTorch definition of the Mannequin Challenge hourglass (HourglassModel(3), google/mannequinchallenge
-models/hourglass.py) with a width multiplier, written from the facts in shared/MODELS.md.
+models/hourglass.py) with a width multiplier, written from the facts in docs/models.md section 4.
 Parameter / buffer names equal the released state dict at every width.
 
 Width multiplier (shared with models/mannequin.cpp): 16 * width must be a whole number; every

@@ -1,6 +1,6 @@
 """PyTorch definitions of MiDaS v2 (MidasNet, ResNeXt-101 32x8d encoder) and MiDaS v2.1 small
 (MidasNet_small, EfficientNet-Lite3 encoder) with a width multiplier, written from the facts in
-shared/MODELS.md (read from isl-org/MiDaS 5d208c5 / 9983656 and rwightman/gen-efficientnet-pytorch).
+docs/models.md sections 2-3 (read from isl-org/MiDaS 5d208c5 / 9983656 and rwightman/gen-efficientnet-pytorch).
 Parameter / buffer names equal the released state dicts at every width.
 
 Width multiplier (shared with models/midas_v2.cpp and models/midas_small.cpp): `width` must be a

@@ -1,0 +1,55 @@
+#include "models/depth_net_architectures.h"
+
+#include <fmt/format.h>
+
+#include "engine/error.h"
+#include "models/mannequin.h"
+#include "models/midas_small.h"
+#include "models/midas_v2.h"
+
+namespace cvd {
+
+namespace {
+
+template <class Net>
+std::unique_ptr<DepthNet> make(double width, Generator& gen) {
+  return std::make_unique<Net>(width, gen);
+}
+
+}  // namespace
+
+const std::vector<DepthNetArchitecture>& depth_net_architectures() {
+  // lr / lambda: the reference implementation's values for Mannequin (Adam 4e-4, lambda 0.1);
+  // MiDaS predicts inverse depth at another scale, where 1e-4 / 1e-4 were measured stable.
+  static const std::vector<DepthNetArchitecture> table = {
+      {"mannequin", &make<MannequinNet>, DepthOutputKind::log_depth, 16, 4e-4, 0.1,
+       "Mannequin Challenge hourglass (log depth)"},
+      {"midas_v2", &make<MidasV2Net>, DepthOutputKind::inverse_depth, 32, 1e-4, 1e-4,
+       "MiDaS v2, ResNeXt-101 encoder (inverse depth)"},
+      {"midas_small", &make<MidasSmallNet>, DepthOutputKind::inverse_depth, 32, 1e-4, 1e-4,
+       "MiDaS v2.1 small, EfficientNet-Lite3 encoder (inverse depth)"},
+  };
+  return table;
+}
+
+const DepthNetArchitecture& depth_net_architecture(const std::string& name) {
+  std::string names;
+  for (const DepthNetArchitecture& a : depth_net_architectures()) {
+    if (a.name == name) return a;
+    names += (names.empty() ? "" : ", ") + a.name;
+  }
+  fail(ErrorCategory::unsupported, "unknown depth network architecture '{}' (available: {})", name,
+       names);
+}
+
+std::vector<std::string> depth_net_archs() {
+  std::vector<std::string> names;
+  for (const DepthNetArchitecture& a : depth_net_architectures()) names.push_back(a.name);
+  return names;
+}
+
+std::unique_ptr<DepthNet> create_depth_net(const std::string& arch, double width, Generator& gen) {
+  return depth_net_architecture(arch).create(width, gen);
+}
+
+}  // namespace cvd

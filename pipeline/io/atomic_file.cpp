@@ -1,0 +1,53 @@
+#include "pipeline/io/atomic_file.h"
+
+#include <unistd.h>
+
+#include <atomic>
+#include <fstream>
+#include <string>
+
+#include "engine/error.h"
+
+namespace cvd {
+
+std::filesystem::path temporary_path_for(const std::filesystem::path& target) {
+  static std::atomic<unsigned long> counter{0};
+  const std::string name = "." + target.stem().string() + ".tmp-" +
+                           std::to_string(static_cast<long>(::getpid())) + "-" +
+                           std::to_string(counter.fetch_add(1)) + target.extension().string();
+  return target.parent_path() / name;
+}
+
+void write_atomically(const std::filesystem::path& target,
+                      const std::function<void(const std::filesystem::path& tmp)>& write) {
+  const std::filesystem::path tmp = temporary_path_for(target);
+  try {
+    write(tmp);
+  } catch (...) {
+    std::error_code ignored;
+    std::filesystem::remove(tmp, ignored);
+    throw;
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, target, ec);
+  if (ec) {
+    std::error_code ignored;
+    std::filesystem::remove(tmp, ignored);
+    fail(ErrorCategory::io, "cannot rename '{}' to '{}': {}", tmp.string(), target.string(),
+         ec.message());
+  }
+}
+
+void write_text_file(const std::filesystem::path& target, std::string_view content) {
+  write_atomically(target, [&](const std::filesystem::path& tmp) {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out)
+      fail(ErrorCategory::io, "cannot open '{}' for writing '{}'", tmp.string(), target.string());
+    out.write(content.data(), std::streamsize(content.size()));
+    out.close();
+    if (!out)
+      fail(ErrorCategory::io, "writing '{}' failed (disk full or no permission?)", target.string());
+  });
+}
+
+}  // namespace cvd

@@ -1,0 +1,90 @@
+// Options and results of a whole CVD run (`cvd run`, `cvd demo`, cvd::Pipeline). Every CLI flag
+// of `cvd run` is a field here.
+#pragma once
+#include <atomic>
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+
+#include "pipeline/geometry/camera.h"
+
+namespace cvd {
+
+struct RunProgress {
+  std::string stage;  // "frames", "poses", "initial depth", "flow", "training", "outputs"
+  int done = 0, total = 0;
+  std::string message;  // e.g. "epoch 3/20 loss 1.234"
+};
+
+struct RunOptions {
+  std::filesystem::path input;  // video file or image folder
+  std::filesystem::path out;    // output directory (also holds the resumable stage caches)
+
+  // Frames
+  int max_frames = 0, frame_step = 1, first_frame = 0;
+  int depth_long_side = 384;  // network resolution (aligned to the model)
+  int flow_long_side = 1024;  // flow resolution (never upscaled)
+
+  // Depth network: a converted .cvdw, or the default untrained architecture.
+  std::filesystem::path model;  // empty = default network with no pretrained weights
+  std::string arch = "mannequin";
+  double width = 0.25;  // width multiplier of the default network
+
+  // Poses: "colmap" (run SfM) or a file in `poses_format`.
+  std::filesystem::path poses_file;
+  std::string poses_format = "tum";      // tum | colmap | kitti
+  std::optional<Intrinsics> intrinsics;  // at the input frames' resolution
+  double fov_deg = 0;                    // horizontal FoV; used when intrinsics are absent
+  std::string matcher = "sequential";
+  int colmap_long_side = 640;
+  int colmap_max_features = 4096;
+  std::filesystem::path masks;  // optional folder of masks (same names) passed to COLMAP
+
+  // Flow
+  std::string flow = "dis";  // dis | flownet2
+  std::string dis_preset = "medium";
+  std::filesystem::path flow_model;  // FlowNet2 .cvdw
+  double min_valid_fraction = 0.2;
+  float fb_threshold_px = 1.0f;
+
+  // Training (defaults per architecture when <= 0)
+  int epochs = 20;
+  int batch_pairs = 4;
+  double lr = 0;
+  double lambda_disparity = -1;
+  uint64_t seed = 1;
+  int warmup_steps = 200;  // default network only: fit sparse SfM depth first
+  // Arithmetic of the CPU convolutions during the whole run: "f32" or "bf16" (AMX /
+  // AVX512-BF16; engine/compute_precision.h). Weights, optimizer state and outputs stay f32.
+  std::string precision = "f32";
+
+  // Outputs
+  bool write_videos = true;
+  bool write_point_cloud = true;
+
+  // Evaluation against ground truth (a demo-scene folder, or 7-Scenes style) when given.
+  std::filesystem::path gt;
+
+  std::function<void(const RunProgress&)> progress;
+  const std::atomic<bool>* cancel = nullptr;
+  int stop_after_epochs = -1;  // test hook: behave as if killed after this many epochs
+};
+
+struct RunResult {
+  std::vector<std::string> frame_names;
+  std::vector<FrameCamera> cameras;  // poses in the output depth units
+  std::vector<cv::Mat> depths;       // CV_32F per frame, at the depth resolution
+  Intrinsics depth_intrinsics;
+  int num_pairs = 0, num_pairs_dropped = 0;
+  std::vector<double> epoch_losses;
+  double initial_loss = 0, final_loss = 0;
+  nlohmann::json metrics;   // from evaluation when GT was given
+  nlohmann::json run_info;  // what run.json holds
+};
+
+}  // namespace cvd

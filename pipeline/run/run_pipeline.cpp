@@ -1,0 +1,448 @@
+#include "pipeline/run/run_pipeline.h"
+
+#include <spdlog/spdlog.h>
+
+#include <zlib.h>
+#include <algorithm>
+#include <chrono>
+#include <opencv2/imgproc.hpp>
+
+#include "engine/adam.h"
+#include "engine/autograd.h"
+#include "engine/backend_info.h"
+#include "engine/compute_precision.h"
+#include "engine/cvdw.h"
+#include "engine/module_weights.h"
+#include "engine/ops.h"
+#include "kernels/builtin_backends.h"
+#include "models/depth_net_architectures.h"
+#include "pipeline/eval/eval_sparse.h"
+#include "pipeline/flow/user_masks.h"
+#include "pipeline/geometry/flow_triangulation.h"
+#include "pipeline/geometry/scale_calibration.h"
+#include "pipeline/io/atomic_file.h"
+#include "pipeline/io/frame_source.h"
+#include "pipeline/io/pfm_io.h"
+#include "pipeline/run/run_outputs.h"
+#include "pipeline/run/run_stages.h"
+#include "pipeline/training/test_time_training.h"
+
+namespace cvd {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+double default_learning_rate(const std::string& arch) {
+  return depth_net_architecture(arch).default_lr;
+}
+double default_lambda(const std::string& arch) {
+  return depth_net_architecture(arch).default_lambda;
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
+
+std::unique_ptr<DepthNet> load_network(const RunOptions& o, std::string& description) {
+  std::string arch = o.arch;
+  double width = o.width;
+  if (!o.model.empty()) {
+    CvdwReader r(o.model);
+    if (!r.header().model.empty()) arch = r.header().model;
+    width = r.header().config.is_object() ? r.header().config.value("width", 1.0) : 1.0;
+  }
+  Generator gen(o.seed);
+  std::unique_ptr<DepthNet> net;
+  try {
+    net = create_depth_net(arch, width, gen);
+  } catch (const Error& e) {
+    if (o.model.empty()) throw;
+    fail(ErrorCategory::invalid_argument, "{}: not a depth network weights file: {}",
+         o.model.string(), e.what());
+  }
+  if (!o.model.empty()) {
+    load_weights(*net, o.model, true);
+    description = fmt::format("{} from {}", arch, o.model.string());
+  } else {
+    description =
+        fmt::format("{} (width x{}) with no pretrained weights (default network)", arch, width);
+  }
+  return net;
+}
+
+// Projected sparse points of one frame: pixel (u, v) at the depth resolution and depth z.
+struct SparseDepth {
+  std::vector<double> u, v, z;
+};
+
+SparseDepth project_points(const FrameCamera& c, const std::vector<Eigen::Vector3d>& pts) {
+  SparseDepth s;
+  const Intrinsics& K = c.intrinsics;
+  for (const auto& X : pts) {
+    Eigen::Vector3d p = c.pose.R.transpose() * (X - c.pose.t);
+    if (p.z() <= 0) continue;
+    double u = K.fx * p.x() / p.z() + K.cx, v = K.fy * p.y() / p.z() + K.cy;
+    if (u < 0 || v < 0 || u > K.width - 1 || v > K.height - 1) continue;
+    s.u.push_back(u);
+    s.v.push_back(v);
+    s.z.push_back(p.z());
+  }
+  return s;
+}
+
+double median_of(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
+
+// Sets the untrained network's output level to the scene's median sparse depth and fits the
+// sparse depths for a few steps (mean |log D - log z| at the projected points).
+void initialise_default_network(DepthNet& net, const std::function<Tensor(int)>& load_frame,
+                                const std::vector<SparseDepth>& sparse, const RunOptions& o,
+                                json& info) {
+  std::vector<double> all;
+  for (auto& s : sparse) all.insert(all.end(), s.z.begin(), s.z.end());
+  CVD_CHECK(!all.empty(), "no sparse 3-D points to initialise the default network's depth level");
+  double med = median_of(all);
+  {
+    NoGradGuard ng;
+    Tensor b = net.output_bias();
+    double level = net.output_kind() == DepthOutputKind::log_depth ? std::log(med) : 1.0 / med;
+    b.fill_(level);
+  }
+  info["initial_depth_level"] = med;
+  std::vector<int> frames;
+  for (size_t k = 0; k < sparse.size(); ++k)
+    if (sparse[k].z.size() >= 8) frames.push_back(static_cast<int>(k));
+  if (o.warmup_steps <= 0 || frames.empty()) return;
+  AdamOptions ao;
+  ao.lr = o.lr > 0 ? o.lr : default_learning_rate(net.arch());
+  Adam adam(net.parameters(), ao);
+  Generator rng(o.seed + 17);
+  net.train(true);
+  double last = 0;
+  for (int step = 0; step < o.warmup_steps; ++step) {
+    std::vector<int> batch;
+    for (int b = 0; b < std::min<int>(4, static_cast<int>(frames.size())); ++b)
+      batch.push_back(frames[rng.randint(0, static_cast<int64_t>(frames.size()))]);
+    std::vector<Tensor> imgs;
+    for (int f : batch) imgs.push_back(load_frame(f).unsqueeze(0));
+    Tensor depth = net.depth(concat(imgs, 0));
+    int64_t H = depth.size(2), W = depth.size(3);
+    Tensor loss;
+    for (size_t b = 0; b < batch.size(); ++b) {
+      const SparseDepth& s = sparse[batch[b]];
+      int64_t n = static_cast<int64_t>(s.z.size());
+      std::vector<double> g(2 * n), lz(n);
+      for (int64_t k = 0; k < n; ++k) {
+        g[2 * k] = 2.0 * s.u[k] / std::max<int64_t>(W - 1, 1) - 1.0;
+        g[2 * k + 1] = 2.0 * s.v[k] / std::max<int64_t>(H - 1, 1) - 1.0;
+        lz[k] = std::log(s.z[k]);
+      }
+      Tensor grid = Tensor::from_vector(g, {1, 1, n, 2});
+      Tensor d = grid_sample(depth.narrow(0, static_cast<int64_t>(b), 1), grid,
+                             GridSampleParams{GridPadding::border, true})
+                     .reshape({n});
+      Tensor l = mean(abs(sub(log(d), Tensor::from_vector(lz, {n}))));
+      loss = loss.defined() ? add(loss, l) : l;
+    }
+    loss = mul_scalar(loss, 1.0 / static_cast<double>(batch.size()));
+    adam.zero_grad();
+    last = loss.item();
+    if (!std::isfinite(last)) continue;
+    loss.backward();
+    adam.step();
+    if (o.progress)
+      o.progress({"warm-up", step + 1, o.warmup_steps, fmt::format("log-depth L1 {:.4f}", last)});
+  }
+  info["warmup_final_loss"] = last;
+}
+
+std::vector<cv::Mat> infer_depths(DepthNet& net, const std::function<Tensor(int)>& load_frame,
+                                  int n, const RunOptions& o, const std::string& stage) {
+  NoGradGuard ng;
+  net.eval();
+  std::vector<cv::Mat> r;
+  for (int k = 0; k < n; ++k) {
+    r.push_back(depth_to_mat(net.depth(load_frame(k).unsqueeze(0)).squeeze(0).squeeze(0)));
+    if (o.progress) o.progress({stage, k + 1, n, ""});
+  }
+  return r;
+}
+
+// Fingerprint of the cameras training sees (a rerun of COLMAP gives other poses).
+uint32_t cameras_crc32(const std::vector<FrameCamera>& cams) {
+  uLong crc = crc32(0L, Z_NULL, 0);
+  for (const auto& c : cams) {
+    double v[17] = {c.intrinsics.fx, c.intrinsics.fy, c.intrinsics.cx, c.intrinsics.cy,
+                    c.pose.t.x(),    c.pose.t.y(),    c.pose.t.z(),    c.registered ? 1.0 : 0.0};
+    for (int k = 0; k < 9; ++k) v[8 + k] = c.pose.R(k / 3, k % 3);
+    crc = crc32(crc, reinterpret_cast<const Bytef*>(v), sizeof v);
+  }
+  return static_cast<uint32_t>(crc);
+}
+
+PairDirection make_direction(const FrameCamera& a, const FrameCamera& b, const cv::Mat& flow,
+                             const cv::Mat& mask) {
+  PairDirection d;
+  d.pose_i = a.pose;
+  d.pose_j = b.pose;
+  d.K_i = a.intrinsics;
+  d.K_j = b.intrinsics;
+  int64_t H = flow.rows, W = flow.cols;
+  d.flow = Tensor::empty({H, W, 2});
+  std::memcpy(d.flow.data<float>(), flow.ptr<float>(), d.flow.nbytes());
+  d.mask = Tensor::empty({H, W});
+  float* m = d.mask.data<float>();
+  for (int64_t k = 0; k < H * W; ++k) m[k] = mask.data[k] ? 1.0f : 0.0f;
+  return d;
+}
+
+}  // namespace
+
+RunResult run_pipeline(const RunOptions& o) {
+  register_builtin_backends();
+  auto t_all = Clock::now();
+  CVD_CHECK(!o.input.empty(), "no input video or folder given");
+  CVD_CHECK(!o.out.empty(), "no output directory given");
+  // Before anything is created: an unknown precision or bf16 without CPU support is an error.
+  const ComputePrecision precision = parse_precision(o.precision);
+  ScopedComputePrecision precision_scope(precision);
+  // Check the input before creating anything, so a typo leaves no output folder behind.
+  std::error_code ec;
+  if (!fs::exists(o.input, ec))
+    fail(ErrorCategory::io, "{}: no such file or directory", o.input.string());
+  if (!o.masks.empty() && !fs::is_directory(o.masks, ec))
+    fail(ErrorCategory::io, "{}: masks folder not found (--masks expects a folder of <frame>.png)",
+         o.masks.string());
+  fs::create_directories(o.out, ec);
+  if (ec || !fs::is_directory(o.out))
+    fail(ErrorCategory::io, "{}: cannot create the output directory ({})", o.out.string(),
+         ec ? ec.message() : "a file of that name exists");
+  fs::path cache = o.out / "cache";
+  json info = {
+      {"version", CVD_VERSION}, {"input", o.input.string()}, {"backends", compiled_backends()}};
+  json timings;
+
+  // 1. Frames
+  auto t = Clock::now();
+  FramesStage frames = run_frames_stage(o, cache);
+  timings["frames"] = since(t);
+  const int n = static_cast<int>(frames.names.size());
+
+  // 2. Network (needed for the depth resolution)
+  std::string net_desc;
+  std::unique_ptr<DepthNet> net = load_network(o, net_desc);
+  cv::Size dsize = aligned_size(frames.width, frames.height, o.depth_long_side, net->alignment());
+  spdlog::info("{} frames of {}x{}; depth network {} at {}x{}", n, frames.input_width,
+               frames.input_height, net_desc, dsize.width, dsize.height);
+  std::function<Tensor(int)> load_frame = [&](int k) {
+    return frame_tensor(frames.load(k), dsize);
+  };
+
+  // 3. Poses
+  t = Clock::now();
+  PosesStage poses = run_poses_stage(o, frames, cache);
+  timings["poses"] = since(t);
+  std::vector<FrameCamera> cams = poses.cameras;
+  for (auto& c : cams) c.intrinsics = c.intrinsics.scaled_to(dsize.width, dsize.height);
+
+  // 4. Flow on sampled pairs
+  t = Clock::now();
+  FlowStage flow = run_flow_stage(o, frames, poses, dsize, cache);
+  timings["flow"] = since(t);
+  if (!o.masks.empty()) {
+    // User masks (0 = ignore, e.g. moving objects) leave the pixels they cover, and pixels whose
+    // flow lands on them, out of triangulation and out of the geometric loss.
+    int with_masks = 0;
+    std::vector<cv::Mat> usable = load_user_masks(o.masks, frames.names, dsize, &with_masks);
+    long long cleared = 0;
+    for (auto& p : flow.pairs) {
+      const cv::Mat &ui = usable[size_t(p.pair.first)], &uj = usable[size_t(p.pair.second)];
+      cleared += apply_user_masks(p.forward_mask, p.forward, ui, uj);
+      cleared += apply_user_masks(p.backward_mask, p.backward, uj, ui);
+    }
+    info["user_masks"] = {{"folder", o.masks.string()},
+                          {"frames_with_masks", with_masks},
+                          {"flow_pixels_cleared", cleared}};
+    spdlog::info("masks: {} of {} frames have a mask; {} flow pixels left out of the loss",
+                 with_masks, n, cleared);
+  }
+
+  // 5. Sparse points: SfM's, or triangulated from flow when poses came from the user.
+  std::vector<std::vector<Eigen::Vector3d>> points = poses.points;
+  bool have_sfm_points = false;
+  for (auto& p : points) have_sfm_points |= !p.empty();
+  if (!have_sfm_points)
+    for (const auto& p : flow.pairs)
+      triangulate_flow_points(cams[p.pair.first], cams[p.pair.second], p.pair.first, p.pair.second,
+                              p.forward, p.forward_mask, points);
+
+  // 6. Initial depth, scale calibration / default-network initialisation
+  t = Clock::now();
+  std::vector<SparseDepth> sparse(n);
+  for (int k = 0; k < n; ++k)
+    if (cams[k].registered) sparse[k] = project_points(cams[k], points[k]);
+  json calib;
+  if (o.model.empty()) {
+    initialise_default_network(*net, load_frame, sparse, o, calib);
+    calib["method"] =
+        "default network: output level set to the median sparse depth, then warm-up "
+        "on sparse depths; poses keep their units";
+  }
+  std::vector<cv::Mat> initial = infer_depths(*net, load_frame, n, o, "initial depth");
+  if (!o.model.empty()) {
+    ScaleCalibrationResult sc = calibrate_scale(cams, initial, points);
+    CVD_CHECK(sc.num_valid() > 0, "scale calibration: no frame has enough sparse points");
+    cams = sc.cameras;
+    calib = {{"method", "per-frame median ratio network/SfM depth, mean over frames"},
+             {"scale", sc.scale},
+             {"frame_scales", sc.frame_scales},
+             {"valid_frames", sc.num_valid()}};
+  }
+  timings["initial_depth"] = since(t);
+
+  // 7. Test-time training
+  std::vector<TrainingPair> pairs;
+  for (const auto& p : flow.pairs) {
+    int i = p.pair.first, j = p.pair.second;
+    pairs.push_back({i, j, make_direction(cams[i], cams[j], p.forward, p.forward_mask),
+                     make_direction(cams[j], cams[i], p.backward, p.backward_mask)});
+  }
+  TrainingOptions to;
+  to.epochs = o.epochs;
+  to.batch_pairs = o.batch_pairs;
+  to.lr = o.lr > 0 ? o.lr : default_learning_rate(net->arch());
+  to.lambda_disparity = o.lambda_disparity >= 0 ? o.lambda_disparity : default_lambda(net->arch());
+  to.seed = o.seed;
+  to.checkpoint_dir = cache / "training";
+  to.resume_key = json{{"model", o.model.string()},
+                       {"arch", net->arch()},
+                       {"width", o.width},
+                       {"depth_size", {dsize.width, dsize.height}},
+                       {"lr", to.lr},
+                       {"lambda", to.lambda_disparity},
+                       {"batch_pairs", to.batch_pairs},
+                       {"seed", to.seed},
+                       {"warmup_steps", o.warmup_steps},
+                       {"masks", o.masks.string()},
+                       {"poses", poses.source},
+                       {"flow", o.flow},
+                       {"precision", precision_name(precision)},
+                       {"pairs", pairs.size()},
+                       {"cameras_crc32", cameras_crc32(cams)}}
+                      .dump();
+  to.stop_after_epochs = o.stop_after_epochs;
+  if (o.cancel) to.cancelled = [c = o.cancel] { return c->load(); };
+  to.on_step = [&](int e, int s, int steps, double l) {
+    if (o.progress)
+      o.progress({"training", (e - 1) * steps + s, o.epochs * steps,
+                  fmt::format("epoch {}/{} loss {:.4f}", e, o.epochs, l)});
+  };
+  to.on_epoch = [&](int e, double l) {
+    spdlog::info("training: epoch {}/{} mean loss {:.4f}", e, o.epochs, l);
+  };
+  t = Clock::now();
+  RunResult res;
+  res.initial_loss = evaluate_geometric_loss(*net, load_frame, pairs, to.lambda_disparity);
+  TrainingResult tr = train_test_time(*net, load_frame, pairs, to);
+  timings["training"] = since(t);
+  if (o.stop_after_epochs >= 0 && static_cast<int>(tr.epoch_losses.size()) < o.epochs)
+    fail(ErrorCategory::cancelled, "stopped after epoch {} (test hook)", tr.epoch_losses.size());
+  res.final_loss = evaluate_geometric_loss(*net, load_frame, pairs, to.lambda_disparity);
+
+  // 8. Outputs (a failure while writing them, e.g. a full disk, removes the partial ones)
+  t = Clock::now();
+  PartialOutputsGuard partial_outputs(o.out);
+  RunOutputs outs;
+  outs.names = frames.names;
+  outs.depths = infer_depths(*net, load_frame, n, o, "final depth");
+  outs.cameras = cams;
+  outs.fps = frames.fps;
+  for (int k = 0; k < n; ++k) {
+    cv::Mat s;
+    cv::resize(frames.load(k), s, dsize, 0, 0, cv::INTER_AREA);
+    outs.frames_bgr.push_back(s);
+  }
+  write_depth_maps(o.out, outs);
+  write_cameras(o.out, outs);
+  if (o.write_point_cloud) write_point_cloud(o.out / "points.ply", outs);
+  if (o.write_videos) write_videos(o.out, outs);
+  {
+    std::map<std::string, SparseDepthFrame> sd;
+    for (int k = 0; k < n; ++k) {
+      if (sparse[k].z.empty()) continue;
+      SparseDepthFrame& f = sd[frames.names[k]];
+      f.width = cams[k].intrinsics.width;
+      f.height = cams[k].intrinsics.height;
+      for (size_t q = 0; q < sparse[k].z.size(); ++q)
+        f.points.push_back({sparse[k].u[q], sparse[k].v[q], sparse[k].z[q]});
+    }
+    write_sparse_depth_csv(o.out / "sparse_depth.csv", sd);
+  }
+  fs::create_directories(o.out / "depth_initial");
+  for (int k = 0; k < n; ++k)
+    write_pfm(o.out / "depth_initial" / (frames.names[k] + ".pfm"), initial[k]);
+  timings["outputs"] = since(t);
+  timings["total"] = since(t_all);
+
+  int registered = 0;
+  for (auto& c : cams) registered += c.registered;
+  res.frame_names = frames.names;
+  res.cameras = cams;
+  res.depths = outs.depths;
+  res.depth_intrinsics = cams[0].intrinsics;
+  res.num_pairs = static_cast<int>(pairs.size());
+  res.num_pairs_dropped = flow.dropped;
+  res.epoch_losses = tr.epoch_losses;
+  info["network"] = net_desc;
+  info["depth_size"] = {dsize.width, dsize.height};
+  info["frame_stats"] = {{"count", n},
+                         {"registered", registered},
+                         {"input_size", {frames.input_width, frames.input_height}}};
+  // The frames of poses.txt, in its order (registered frames only), for `cvd eval`.
+  json frame_list = json::array();
+  for (int k = 0; k < n; ++k)
+    if (cams[k].registered)
+      frame_list.push_back({{"name", frames.names[k]}, {"timestamp", k / frames.fps}});
+  info["frames"] = frame_list;
+  info["poses"] = {{"source", poses.source},
+                   {"intrinsics_source", poses.intrinsics_source},
+                   {"intrinsics_depth_res",
+                    {cams[0].intrinsics.fx, cams[0].intrinsics.fy, cams[0].intrinsics.cx,
+                     cams[0].intrinsics.cy}},
+                   {"details", poses.info}};
+  info["calibration"] = calib;
+  {
+    int64_t count = 0;
+    for (auto& sp : sparse) count += static_cast<int64_t>(sp.z.size());
+    info["sparse_points"] = {{"source", have_sfm_points ? "sfm" : "flow triangulation"},
+                             {"observations", count},
+                             {"file", "sparse_depth.csv"}};
+  }
+  info["pairs"] = {{"kept", res.num_pairs}, {"dropped", flow.dropped}};
+  info["training"] = {{"epochs", o.epochs},
+                      {"batch_pairs", to.batch_pairs},
+                      {"lr", to.lr},
+                      {"lambda", to.lambda_disparity},
+                      {"seed", o.seed},
+                      {"precision", precision_name(precision)},
+                      {"precision_unit",
+                       precision == ComputePrecision::bf16 ? bf16_unit() : std::string("f32 FMA")},
+                      {"epoch_losses", tr.epoch_losses},
+                      {"skipped_steps", tr.skipped_steps},
+                      {"resumed_from_epoch", tr.resumed_from_epoch},
+                      {"geometric_loss_before", res.initial_loss},
+                      {"geometric_loss_after", res.final_loss}};
+  info["timings_s"] = timings;
+  res.run_info = info;
+  write_text_file(o.out / "run.json", info.dump(2));
+  partial_outputs.commit();
+  return res;
+}
+
+}  // namespace cvd

@@ -1,0 +1,15 @@
+// The whole CVD pipeline (docs/design.md section 5): frames -> poses -> initial depth -> scale
+// calibration -> pair sampling -> flow -> test-time training -> outputs -> evaluation.
+// Every stage caches its result under <out>/cache, so rerunning the same command resumes.
+#pragma once
+#include "pipeline/run/run_options.h"
+
+namespace cvd {
+
+RunResult run_pipeline(const RunOptions& options);
+
+// Default (lr, lambda) of the paper per architecture (docs/design.md 5.7; models/depth_net_architectures.h).
+double default_learning_rate(const std::string& arch);
+double default_lambda(const std::string& arch);
+
+}  // namespace cvd

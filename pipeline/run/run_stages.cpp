@@ -1,0 +1,520 @@
+#include "pipeline/run/run_stages.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cctype>
+#include <chrono>
+#include <cstring>
+#include <fstream>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <set>
+
+#include "engine/error.h"
+#include "pipeline/flow/flow_dis.h"
+#include "pipeline/flow/flow_flownet2.h"
+#include "pipeline/flow/flow_pair.h"
+#include "pipeline/io/atomic_file.h"
+#include "pipeline/io/flow_io.h"
+#include "pipeline/io/frame_source.h"
+#include "pipeline/io/trajectory_io.h"
+#include "pipeline/poses/colmap_runner.h"
+#include "pipeline/poses/container_focal.h"
+#include "pipeline/poses/exif_focal.h"
+#include "pipeline/poses/intrinsics_focal_search.h"
+
+namespace cvd {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+json read_json_if(const fs::path& p) {
+  std::ifstream in(p);
+  if (!in) return json();
+  try {
+    return json::parse(in);
+  } catch (...) {
+    return json();
+  }
+}
+
+void report(const RunOptions& o, const std::string& stage, int done, int total,
+            const std::string& msg = "") {
+  if (o.progress) o.progress({stage, done, total, msg});
+  if (o.cancel && o.cancel->load()) fail(ErrorCategory::cancelled, "cancelled during {}", stage);
+}
+
+}  // namespace
+
+// ---- frames ------------------------------------------------------------------------------------
+cv::Mat FramesStage::load(int k) const {
+  fs::path p = dir / (names.at(k) + ".png");
+  cv::Mat m = cv::imread(p.string(), cv::IMREAD_COLOR);
+  if (m.empty()) fail(ErrorCategory::io, "{}: cached frame missing or unreadable", p.string());
+  return m;
+}
+
+FramesStage run_frames_stage(const RunOptions& o, const fs::path& cache) {
+  FramesStage st;
+  st.dir = cache / "frames";
+  json key = {{"input", fs::absolute(o.input).string()},
+              {"max_frames", o.max_frames},
+              {"step", o.frame_step},
+              {"first", o.first_frame},
+              {"flow_long_side", o.flow_long_side}};
+  json done = read_json_if(st.dir / "frames.json");
+  if (!done.is_null() && done.value("key", json()) == key) {
+    st.names = done["names"].get<std::vector<std::string>>();
+    st.width = done["width"];
+    st.height = done["height"];
+    st.input_width = done["input_width"];
+    st.input_height = done["input_height"];
+    st.fps = done["fps"];
+    spdlog::info("frames: {} cached frames in {}", st.names.size(), st.dir.string());
+    return st;
+  }
+  fs::create_directories(st.dir);
+  FrameSourceOptions fo{o.max_frames, o.frame_step, o.first_frame};
+  FrameSourceInfo info =
+      read_frames(o.input, fo, [&](int k, const std::string& name, const cv::Mat& bgr) {
+        cv::Mat img = bgr;
+        int long_side = std::max(bgr.cols, bgr.rows);
+        if (o.flow_long_side > 0 && long_side > o.flow_long_side) {
+          double s = double(o.flow_long_side) / long_side;
+          cv::resize(bgr, img, cv::Size(std::lround(bgr.cols * s), std::lround(bgr.rows * s)), 0, 0,
+                     cv::INTER_AREA);
+        }
+        fs::path p = st.dir / (name + ".png");
+        write_atomically(p, [&](const fs::path& tmp) {
+          if (!cv::imwrite(tmp.string(), img))
+            fail(ErrorCategory::io, "{}: cannot write", p.string());
+        });
+        st.width = img.cols;
+        st.height = img.rows;
+        report(o, "frames", k + 1, 0, name);
+      });
+  st.names = info.names;
+  st.input_width = info.width;
+  st.input_height = info.height;
+  st.fps = info.fps;
+  std::set<std::string> unique(st.names.begin(), st.names.end());
+  CVD_CHECK(unique.size() == st.names.size(), "{}: frame names are not unique", o.input.string());
+  json j = {{"key", key},
+            {"names", st.names},
+            {"width", st.width},
+            {"height", st.height},
+            {"input_width", st.input_width},
+            {"input_height", st.input_height},
+            {"fps", st.fps}};
+  write_text_file(st.dir / "frames.json", j.dump(1));
+  return st;
+}
+
+// ---- poses -------------------------------------------------------------------------------------
+namespace {
+
+std::optional<Intrinsics> user_intrinsics(const RunOptions& o, const FramesStage& f) {
+  if (o.intrinsics) {
+    Intrinsics k = *o.intrinsics;
+    if (k.width == 0) {
+      k.width = f.input_width;
+      k.height = f.input_height;
+    }
+    validate_intrinsics(k, "--intrinsics");
+    return k.scaled_to(f.width, f.height);
+  }
+  if (o.fov_deg > 0) {
+    CVD_CHECK(o.fov_deg > 5 && o.fov_deg < 170, "--fov {} degrees is implausible (5..170)",
+              o.fov_deg);
+    double fx = 0.5 * f.width / std::tan(0.5 * o.fov_deg * M_PI / 180.0);
+    return Intrinsics{fx, fx, 0.5 * f.width - 0.5, 0.5 * f.height - 0.5, f.width, f.height};
+  }
+  return std::nullopt;
+}
+
+// Where a camera-written focal came from: "exif" (first JPEG of an image folder) or
+// "container" (the video file's metadata), the file and tag, and the 35 mm equivalent value.
+struct MetadataFocal {
+  std::string kind, file, tag;
+  double focal_35mm = 0;
+};
+
+std::optional<MetadataFocal> find_metadata_focal(const RunOptions& o) {
+  std::error_code ec;
+  if (!fs::is_directory(o.input, ec)) {
+    std::optional<ContainerFocal> c = read_container_focal_35mm(o.input);
+    if (!c) return std::nullopt;
+    return MetadataFocal{"container", o.input.string(), c->key, c->focal_35mm};
+  }
+  std::vector<fs::path> jpegs;
+  for (const auto& e : fs::directory_iterator(o.input, ec)) {
+    std::string ext = e.path().extension().string();
+    for (auto& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    if (ext == ".jpg" || ext == ".jpeg") jpegs.push_back(e.path());
+  }
+  if (jpegs.empty()) return std::nullopt;
+  std::sort(jpegs.begin(), jpegs.end());
+  std::optional<double> f35 = read_exif_focal_35mm(jpegs.front());
+  if (!f35) return std::nullopt;
+  return MetadataFocal{"exif", jpegs.front().string(), "FocalLengthIn35mmFilm", *f35};
+}
+
+// The 35 mm equivalent focal written by the camera: EXIF of the first JPEG of an image folder,
+// or the video container's metadata (pipeline/poses/container_focal.h). Intrinsics at the cached
+// frames' size with the principal point at the centre, or nullopt.
+std::optional<Intrinsics> metadata_intrinsics(const RunOptions& o, const FramesStage& f,
+                                              MetadataFocal* found) {
+  std::optional<MetadataFocal> m = find_metadata_focal(o);
+  if (!m) return std::nullopt;
+  // The equivalence is on the image diagonal of the input frames; scale to the cached frames.
+  double fx =
+      focal_px_from_35mm(m->focal_35mm, f.input_width, f.input_height) * f.width / f.input_width;
+  Intrinsics k{fx, fx, 0.5 * f.width - 0.5, 0.5 * f.height - 0.5, f.width, f.height};
+  std::string w = implausible_focal_warning(fx, f.width, f.height);
+  if (!w.empty()) {
+    spdlog::warn("poses: {} {} mm of {} ignored: {}", m->tag, m->focal_35mm, m->file, w);
+    return std::nullopt;
+  }
+  spdlog::info("poses: focal from the {} of {}: {} = {} mm (35 mm equivalent) = {:.1f} px",
+               m->kind == "exif" ? "EXIF" : "container metadata", m->file, m->tag, m->focal_35mm,
+               fx);
+  *found = *m;
+  return k;
+}
+
+std::vector<FrameCamera> cameras_from_file(const RunOptions& o, const FramesStage& f,
+                                           const Intrinsics& K) {
+  std::vector<Pose> poses;
+  std::vector<FrameCamera> cams(f.names.size());
+  const std::string& fmt_name = o.poses_format;
+  if (fmt_name == "tum" || fmt_name == "kitti") {
+    if (fmt_name == "tum") {
+      for (auto& tp : read_tum_trajectory(o.poses_file)) poses.push_back(tp.pose);
+    } else {
+      poses = read_kitti_trajectory(o.poses_file);
+    }
+    // Poses are matched to the SELECTED frames by source index (first + k * step).
+    for (size_t k = 0; k < f.names.size(); ++k) {
+      size_t src = o.first_frame + k * std::max(1, o.frame_step);
+      if (src >= poses.size())
+        fail(ErrorCategory::invalid_argument,
+             "{}: {} poses, but frame '{}' needs pose #{} (fewer poses than frames)",
+             o.poses_file.string(), poses.size(), f.names[k], src + 1);
+      cams[k] = {f.names[k], poses[src], K, true, 0};
+    }
+  } else if (fmt_name == "colmap") {
+    ColmapModel m = read_colmap_text_model(o.poses_file);
+    for (size_t k = 0; k < f.names.size(); ++k) {
+      const ColmapImage* im = m.find_image(f.names[k]);
+      if (!im) {
+        for (auto& [n, img] : m.images)
+          if (fs::path(n).stem().string() == f.names[k]) im = &img;
+      }
+      cams[k] = {f.names[k], im ? im->pose : Pose{}, K, im != nullptr, 0};
+      if (!im) spdlog::warn("poses: frame '{}' is not in {}", f.names[k], o.poses_file.string());
+    }
+  } else {
+    fail(ErrorCategory::invalid_argument, "unknown poses format '{}' (tum, colmap or kitti)",
+         fmt_name);
+  }
+  return cams;
+}
+
+}  // namespace
+
+PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::path& cache) {
+  auto t0 = std::chrono::steady_clock::now();
+  PosesStage st;
+  st.cameras.resize(f.names.size());
+  st.points.resize(f.names.size());
+  // Intrinsics in order of trust: the user's, the camera's EXIF / container focal, else estimated by the
+  // COLMAP focal search (pipeline/poses/intrinsics_focal_search.h).
+  std::optional<Intrinsics> K = user_intrinsics(o, f);
+  json intrinsics_info;
+  if (K) {
+    st.intrinsics_source = o.intrinsics ? "user (--intrinsics)" : "user (--fov)";
+    intrinsics_info = {{"source", o.intrinsics ? "user_intrinsics" : "user_fov"}};
+  } else {
+    MetadataFocal mf;
+    K = metadata_intrinsics(o, f, &mf);
+    if (K) {
+      st.intrinsics_source = fmt::format("{} {} {} mm", mf.kind == "exif" ? "EXIF" : "container",
+                                         mf.tag, mf.focal_35mm);
+      intrinsics_info = {
+          {"source", mf.kind}, {"focal_35mm", mf.focal_35mm}, {"file", mf.file}, {"tag", mf.tag}};
+    } else {
+      st.intrinsics_source = "estimated (COLMAP focal search)";
+      intrinsics_info = {{"source", "estimated"}};
+    }
+  }
+  if (!o.poses_file.empty()) {
+    if (!K)
+      fail(ErrorCategory::invalid_argument,
+           "poses from {} need the camera intrinsics: pass --intrinsics fx,fy,cx,cy or --fov DEG",
+           o.poses_file.string());
+    st.cameras = cameras_from_file(o, f, *K);
+    st.source = o.poses_format + " file " + o.poses_file.string();
+  } else {
+    fs::path dir = cache / "colmap";
+    ColmapOptions co;
+    co.matcher = o.matcher == "exhaustive" ? ColmapMatcher::exhaustive : ColmapMatcher::sequential;
+    co.max_image_size = o.colmap_long_side;
+    co.max_num_features = o.colmap_max_features;
+    co.intrinsics = K;
+    fs::path model_dir = dir / "result_model";
+    // What the cached model was made from: other settings, masks or frames mean another run.
+    json key = {{"matcher", o.matcher},
+                {"long_side", o.colmap_long_side},
+                {"max_features", o.colmap_max_features},
+                {"masks", o.masks.string()},
+                {"intrinsics", K ? json{K->fx, K->fy, K->cx, K->cy, K->width, K->height} : json()},
+                {"frames", f.names}};
+    ColmapModel model;
+    std::error_code ec;
+    if (fs::exists(model_dir / "images.txt") && read_json_if(dir / "cache_key.json") != key) {
+      spdlog::info("poses: the cached COLMAP model was made with other settings; running again");
+      fs::remove_all(model_dir, ec);
+    }
+    if (fs::exists(model_dir / "images.txt")) {
+      model = read_colmap_text_model(model_dir);
+      spdlog::info("poses: cached COLMAP model in {}", model_dir.string());
+      json cached = read_json_if(dir / "intrinsics_info.json");
+      if (cached.is_object() && cached.value("source", "") == intrinsics_info.value("source", ""))
+        intrinsics_info = cached;
+    } else {
+      report(o, "poses", 0, 1, "running COLMAP");
+      std::vector<ColmapFrame> frames;
+      for (size_t k = 0; k < f.names.size(); ++k) {
+        ColmapFrame cf{f.names[k], f.load(static_cast<int>(k)), cv::Mat()};
+        if (!o.masks.empty()) {
+          fs::path mp = o.masks / (f.names[k] + ".png");
+          if (fs::exists(mp)) {
+            cf.mask = cv::imread(mp.string(), cv::IMREAD_GRAYSCALE);
+            if (cf.mask.size() != cf.image.size())
+              cv::resize(cf.mask, cf.mask, cf.image.size(), 0, 0, cv::INTER_NEAREST);
+          }
+        }
+        frames.push_back(std::move(cf));
+      }
+      ColmapResult r = run_colmap(frames, dir / "work", co);
+      for (auto& w : r.warnings) spdlog::warn("poses: {}", w);
+      if (!r.unregistered.empty())
+        spdlog::warn("poses: COLMAP did not register {} frame(s): {}", r.unregistered.size(),
+                     fmt::format("{}", fmt::join(r.unregistered, ", ")));
+      model = r.model;
+      st.info = {{"colmap_models", r.num_models},
+                 {"colmap_attempts", r.attempts},
+                 {"colmap_seconds", r.seconds},
+                 {"unregistered", r.unregistered},
+                 {"warnings", r.warnings}};
+      if (!K) {
+        json cands = json::array();
+        for (const auto& c : r.focal_candidates)
+          cands.push_back({{"focal_px", c.focal_px},
+                           {"fov_x_deg", c.fov_x_deg},
+                           {"registered", c.registered},
+                           {"models", c.num_models},
+                           {"points", c.points},
+                           {"mean_reprojection_error_px", c.mean_reprojection_error},
+                           {"seconds", c.seconds}});
+        intrinsics_info["method"] = r.focal_method;
+        intrinsics_info["candidates"] = cands;
+        intrinsics_info["searched_focal_px"] = r.searched_focal;
+        intrinsics_info["refined_focal_px"] = r.refined_focal;
+      }
+      write_colmap_text_model(model_dir, model);
+      write_text_file(dir / "intrinsics_info.json", intrinsics_info.dump(1));
+      write_text_file(dir / "cache_key.json", key.dump(1));
+    }
+    for (size_t k = 0; k < f.names.size(); ++k) {
+      const ColmapImage* im = model.find_image(f.names[k]);
+      if (im) {
+        st.cameras[k] = model.frame_camera(f.names[k]);
+        st.points[k] = model.observed_points(f.names[k]);
+      } else {
+        st.cameras[k] = {f.names[k], Pose{}, K ? *K : Intrinsics{}, false, 0};
+      }
+    }
+    // Every registered frame shares one camera; give unregistered frames its intrinsics.
+    for (auto& c : st.cameras)
+      if (c.registered) K = c.intrinsics;
+    for (auto& c : st.cameras)
+      if (!c.registered && K) c.intrinsics = *K;
+    st.source = "colmap";
+  }
+  for (const auto& c : st.cameras)
+    if (c.registered) {
+      intrinsics_info["fx"] = c.intrinsics.fx;
+      intrinsics_info["fy"] = c.intrinsics.fy;
+      intrinsics_info["cx"] = c.intrinsics.cx;
+      intrinsics_info["cy"] = c.intrinsics.cy;
+      intrinsics_info["resolution"] = {c.intrinsics.width, c.intrinsics.height};
+      intrinsics_info["fov_x_deg"] = c.intrinsics.fov_x_deg();
+      break;
+    }
+  st.info["intrinsics"] = intrinsics_info;
+  int registered = 0;
+  for (auto& c : st.cameras) registered += c.registered;
+  CVD_CHECK(registered >= 2, "only {} frame(s) have poses; at least 2 are needed", registered);
+  st.seconds = seconds_since(t0);
+  return st;
+}
+
+// ---- flow --------------------------------------------------------------------------------------
+namespace {
+
+cv::Mat resize_flow(const cv::Mat& flow, cv::Size size) {
+  cv::Mat r;
+  cv::resize(flow, r, size, 0, 0, cv::INTER_LINEAR);
+  double sx = double(size.width) / flow.cols, sy = double(size.height) / flow.rows;
+  for (int y = 0; y < r.rows; ++y)
+    for (int x = 0; x < r.cols; ++x) {
+      auto& v = r.at<cv::Vec2f>(y, x);
+      v[0] = static_cast<float>(v[0] * sx);
+      v[1] = static_cast<float>(v[1] * sy);
+    }
+  return r;
+}
+
+cv::Mat resize_mask(const cv::Mat& m, cv::Size size) {
+  cv::Mat r;
+  cv::resize(m, r, size, 0, 0, cv::INTER_NEAREST);
+  return r;
+}
+
+}  // namespace
+
+FlowStage run_flow_stage(const RunOptions& o, const FramesStage& f, const PosesStage& poses,
+                         cv::Size depth_size, const fs::path& cache) {
+  auto t0 = std::chrono::steady_clock::now();
+  FlowStage st;
+  fs::path dir = cache / "flow";
+  fs::create_directories(dir);
+  // Pairs over the registered frames only (indices map back to frames).
+  std::vector<int> reg;
+  for (size_t k = 0; k < poses.cameras.size(); ++k)
+    if (poses.cameras[k].registered) reg.push_back(static_cast<int>(k));
+  std::vector<FramePair> pairs;
+  for (const FramePair& p : hierarchical_pairs(static_cast<int>(reg.size())))
+    pairs.push_back({reg[p.first], reg[p.second]});
+  std::unique_ptr<FlowEstimator> estimator;
+  if (o.flow == "flownet2") {
+    CVD_CHECK(!o.flow_model.empty(),
+              "--flow flownet2 needs --flow-model FILE.cvdw (no pretrained weights ship; see cvd "
+              "convert)");
+    estimator = std::make_unique<FlowNet2Estimator>(o.flow_model);
+  } else {
+    CVD_CHECK(o.flow == "dis", "unknown flow method '{}' (dis or flownet2)", o.flow);
+    DisFlowOptions dopt;
+    dopt.preset = parse_dis_preset(o.dis_preset);
+    estimator = std::make_unique<DisFlowEstimator>(dopt);
+  }
+  FlowEstimator& dis = *estimator;
+  FlowPairOptions popt;
+  popt.fb_threshold_px = o.fb_threshold_px;
+  json key = {{"method", dis.name()},
+              {"fb", o.fb_threshold_px},
+              {"w", depth_size.width},
+              {"h", depth_size.height},
+              {"frames_w", f.width}};
+  int done = 0;
+  std::map<int, ImageKeypoints> keypoint_cache;
+  for (const FramePair& p : pairs) {
+    std::string stem = fmt::format("{}__{}", f.names[p.first], f.names[p.second]);
+    fs::path meta = dir / (stem + ".json");
+    FlowPairData d;
+    d.pair = p;
+    json m = read_json_if(meta);
+    if (!m.is_null() && m.value("key", json()) == key) {
+      d.forward_valid = m["forward_valid"];
+      d.backward_valid = m["backward_valid"];
+      if (m["kept"].get<bool>()) {
+        d.forward = read_flo(dir / (stem + ".fwd.flo"));
+        d.backward = read_flo(dir / (stem + ".bwd.flo"));
+        d.forward_mask =
+            cv::imread((dir / (stem + ".fwd_mask.png")).string(), cv::IMREAD_GRAYSCALE);
+        d.backward_mask =
+            cv::imread((dir / (stem + ".bwd_mask.png")).string(), cv::IMREAD_GRAYSCALE);
+      }
+    } else {
+      // Keypoints are detected once per frame and reused by every pair that frame is in.
+      auto keypoints = [&](int k, const cv::Mat& img) -> const ImageKeypoints& {
+        auto it = keypoint_cache.find(k);
+        if (it == keypoint_cache.end())
+          it = keypoint_cache.emplace(k, detect_keypoints(img, popt.homography)).first;
+        return it->second;
+      };
+      cv::Mat img_i = f.load(p.first), img_j = f.load(p.second);
+      FlowPairResult r = compute_pair_flow(dis, img_i, img_j, popt, &keypoints(p.first, img_i),
+                                           &keypoints(p.second, img_j));
+      d.forward_valid = r.forward_valid_fraction;
+      d.backward_valid = r.backward_valid_fraction;
+      bool kept = r.both_directions_keep(o.min_valid_fraction);
+      if (kept) {
+        d.forward = resize_flow(r.forward, depth_size);
+        d.backward = resize_flow(r.backward, depth_size);
+        d.forward_mask = resize_mask(r.forward_mask, depth_size);
+        d.backward_mask = resize_mask(r.backward_mask, depth_size);
+        write_flo(dir / (stem + ".fwd.flo"), d.forward);
+        write_flo(dir / (stem + ".bwd.flo"), d.backward);
+        for (auto [suffix, mat] :
+             {std::pair{".fwd_mask.png", &d.forward_mask}, {".bwd_mask.png", &d.backward_mask}}) {
+          fs::path mp = dir / (stem + suffix);
+          write_atomically(mp, [&](const fs::path& tmp) {
+            if (!cv::imwrite(tmp.string(), *mat))
+              fail(ErrorCategory::io, "{}: cannot write", mp.string());
+          });
+        }
+      }
+      json mj = {{"key", key},
+                 {"kept", kept},
+                 {"forward_valid", d.forward_valid},
+                 {"backward_valid", d.backward_valid},
+                 {"homography_fallback", r.homography.reason}};
+      write_text_file(meta, mj.dump());
+    }
+    if (!d.forward.empty())
+      st.pairs.push_back(std::move(d));
+    else
+      ++st.dropped;
+    report(o, "flow", ++done, static_cast<int>(pairs.size()), stem);
+  }
+  if (st.pairs.empty())
+    fail(ErrorCategory::invalid_argument,
+         "flow: no frame pair kept {:.0f}% consistent pixels in both directions ({} pairs tried); "
+         "the video may be too short, too blurry or too fast",
+         100 * o.min_valid_fraction, pairs.size());
+  st.seconds = seconds_since(t0);
+  return st;
+}
+
+Tensor frame_tensor(const cv::Mat& bgr, cv::Size size) {
+  cv::Mat rgb, r;
+  cv::resize(bgr, r, size, 0, 0, size.width < bgr.cols ? cv::INTER_AREA : cv::INTER_LINEAR);
+  cv::cvtColor(r, rgb, cv::COLOR_BGR2RGB);
+  Tensor t = Tensor::empty({3, size.height, size.width});
+  float* p = t.data<float>();
+  int64_t hw = int64_t(size.height) * size.width;
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 0; x < size.width; ++x) {
+      const cv::Vec3b& v = rgb.at<cv::Vec3b>(y, x);
+      for (int c = 0; c < 3; ++c) p[c * hw + int64_t(y) * size.width + x] = v[c] / 255.0f;
+    }
+  return t;
+}
+
+cv::Mat depth_to_mat(const Tensor& d) {
+  Tensor c = d.detach().to(DType::f32).contiguous();
+  cv::Mat m(static_cast<int>(c.size(0)), static_cast<int>(c.size(1)), CV_32F);
+  std::memcpy(m.data, c.data<float>(), c.nbytes());
+  return m;
+}
+
+}  // namespace cvd

@@ -1,0 +1,59 @@
+// The stages of run_pipeline (pipeline/run/run_pipeline.cpp), each with its on-disk cache.
+#pragma once
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+#include "models/depth_net.h"
+#include "pipeline/flow/pair_sampling.h"
+#include "pipeline/run/run_options.h"
+
+namespace cvd {
+
+struct FramesStage {
+  std::vector<std::string> names;
+  int width = 0, height = 0;  // of the cached frames (the input, capped at the flow size)
+  int input_width = 0, input_height = 0;
+  double fps = 30;
+  std::filesystem::path dir;  // cache/frames/<name>.png
+  cv::Mat load(int k) const;  // BGR at the cached size
+};
+FramesStage run_frames_stage(const RunOptions& o, const std::filesystem::path& cache);
+
+struct PosesStage {
+  std::vector<FrameCamera>
+      cameras;  // per frame, at the cached frames' resolution; !registered = no pose
+  std::vector<std::vector<Eigen::Vector3d>>
+      points;                     // SfM points each frame observes (may be empty)
+  std::string source;             // "colmap", "tum file ...", ...
+  std::string intrinsics_source;  // "user", "fov", "colmap estimate"
+  double seconds = 0;
+  nlohmann::json info;
+};
+PosesStage run_poses_stage(const RunOptions& o, const FramesStage& frames,
+                           const std::filesystem::path& cache);
+
+struct FlowPairData {
+  FramePair pair;
+  cv::Mat forward, backward;            // CV_32FC2 at the depth resolution
+  cv::Mat forward_mask, backward_mask;  // CV_8U (255 valid)
+  double forward_valid = 0, backward_valid = 0;
+};
+struct FlowStage {
+  std::vector<FlowPairData> pairs;  // kept pairs
+  int dropped = 0;
+  double seconds = 0;
+};
+FlowStage run_flow_stage(const RunOptions& o, const FramesStage& frames, const PosesStage& poses,
+                         cv::Size depth_size, const std::filesystem::path& cache);
+
+// RGB in [0, 1], [3, H, W] f32, at `size`.
+Tensor frame_tensor(const cv::Mat& bgr, cv::Size size);
+cv::Mat depth_to_mat(const Tensor& depth_hw);
+
+}  // namespace cvd

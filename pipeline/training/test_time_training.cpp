@@ -1,0 +1,249 @@
+#include "pipeline/training/test_time_training.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <limits>
+#include <map>
+#include <nlohmann/json.hpp>
+
+#include "engine/adam.h"
+#include "engine/autograd.h"
+#include "engine/module_weights.h"
+#include "engine/ops.h"
+#include "pipeline/io/atomic_file.h"
+
+namespace cvd {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Checkpoint {
+  int epoch = 0;
+  std::string rng_state;
+  std::vector<double> losses;
+  int skipped = 0;
+  std::string key;
+};
+
+fs::path weights_path(const fs::path& dir, int epoch) {
+  return dir / ("checkpoint_epoch" + std::to_string(epoch) + "_weights.cvdw");
+}
+fs::path optim_path(const fs::path& dir, int epoch) {
+  return dir / ("checkpoint_epoch" + std::to_string(epoch) + "_adam.cvdw");
+}
+
+// The index file is written last (atomically), so it always names a complete checkpoint.
+void save_checkpoint(const fs::path& dir, DepthNet& net, const Adam& adam, const Checkpoint& c) {
+  fs::create_directories(dir);
+  save_weights(net, weights_path(dir, c.epoch), net.arch());
+  adam.save(optim_path(dir, c.epoch));
+  nlohmann::json j = {{"epoch", c.epoch},
+                      {"rng_state", c.rng_state},
+                      {"epoch_losses", c.losses},
+                      {"skipped_steps", c.skipped},
+                      {"key", c.key}};
+  write_text_file(dir / "checkpoint.json", j.dump(2));
+  for (int e = 0; e < c.epoch; ++e) {
+    std::error_code ec;
+    fs::remove(weights_path(dir, e), ec);
+    fs::remove(optim_path(dir, e), ec);
+  }
+}
+
+bool load_checkpoint(const fs::path& dir, DepthNet& net, Adam& adam, Checkpoint& c) {
+  fs::path index = dir / "checkpoint.json";
+  if (dir.empty() || !fs::exists(index)) return false;
+  std::ifstream in(index);
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(in);
+    c.epoch = j.at("epoch").get<int>();
+    c.rng_state = j.at("rng_state").get<std::string>();
+    c.losses = j.at("epoch_losses").get<std::vector<double>>();
+    c.skipped = j.at("skipped_steps").get<int>();
+    const std::string stored = j.value("key", std::string());
+    if (stored != c.key) {
+      spdlog::warn(
+          "training: the checkpoint in {} was made with other settings; training starts over",
+          dir.string());
+      c = Checkpoint{0, {}, {}, 0, c.key};
+      return false;
+    }
+  } catch (const nlohmann::json::exception& e) {
+    fail(ErrorCategory::format, "{}: malformed checkpoint index ({}); delete it to start over",
+         index.string(), e.what());
+  }
+  load_weights(net, weights_path(dir, c.epoch), true);
+  adam.load(optim_path(dir, c.epoch));
+  return true;
+}
+
+// Depth [H, W] of every frame used by a batch, from one network forward over the stacked frames.
+std::map<int, Tensor> batch_depths(DepthNet& net, const std::function<Tensor(int)>& load_frame,
+                                   const std::vector<const TrainingPair*>& batch) {
+  std::vector<int> frames;
+  for (auto* p : batch) {
+    frames.push_back(p->i);
+    frames.push_back(p->j);
+  }
+  std::sort(frames.begin(), frames.end());
+  frames.erase(std::unique(frames.begin(), frames.end()), frames.end());
+  std::vector<Tensor> imgs;
+  for (int f : frames) imgs.push_back(load_frame(f).unsqueeze(0));
+  Tensor depth = net.depth(concat(imgs, 0));  // [n, 1, H, W]
+  std::map<int, Tensor> r;
+  for (size_t k = 0; k < frames.size(); ++k)
+    r[frames[k]] = depth.narrow(0, static_cast<int64_t>(k), 1).squeeze(0).squeeze(0);
+  return r;
+}
+
+Tensor batch_loss(const std::map<int, Tensor>& depths,
+                  const std::vector<const TrainingPair*>& batch, const GeometricLossOptions& lo) {
+  Tensor total;
+  for (auto* p : batch) {
+    Tensor l = geometric_loss_pair(depths.at(p->i), depths.at(p->j), p->ij, p->ji, lo).total;
+    total = total.defined() ? add(total, l) : l;
+  }
+  return mul_scalar(total, 1.0 / static_cast<double>(batch.size()));
+}
+
+// Fault injection for the reliability tests: CVD_FAULT_NAN_LOSS_STEPS="1,3" treats the loss of
+// those training steps (1-based, counted over all epochs: epoch e's step s is
+// (e - 1) * steps_per_epoch + s) as NaN; "all" makes every loss NaN. Unset: no effect.
+struct NanLossFault {
+  bool all = false;
+  std::vector<int> steps;
+  bool hits(int step) const {
+    return all || std::find(steps.begin(), steps.end(), step) != steps.end();
+  }
+};
+
+NanLossFault nan_loss_fault_from_env() {
+  NanLossFault f;
+  const char* v = std::getenv("CVD_FAULT_NAN_LOSS_STEPS");
+  if (!v || !*v) return f;
+  std::string s(v);
+  if (s == "all") {
+    f.all = true;
+  } else {
+    size_t pos = 0;
+    while (pos <= s.size()) {
+      size_t end = s.find(',', pos);
+      if (end == std::string::npos) end = s.size();
+      std::string item = s.substr(pos, end - pos);
+      try {
+        f.steps.push_back(std::stoi(item));
+      } catch (...) {
+        fail(ErrorCategory::invalid_argument,
+             "CVD_FAULT_NAN_LOSS_STEPS='{}': '{}' is not a step number (use e.g. 1,3 or all)", s,
+             item);
+      }
+      pos = end + 1;
+    }
+  }
+  spdlog::warn("fault injection: CVD_FAULT_NAN_LOSS_STEPS={} (these training losses become NaN)",
+               s);
+  return f;
+}
+
+}  // namespace
+
+TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& load_frame,
+                               const std::vector<TrainingPair>& pairs, const TrainingOptions& o) {
+  CVD_CHECK(!pairs.empty(), "test-time training needs at least one frame pair");
+  CVD_CHECK(o.batch_pairs >= 1 && o.epochs >= 0 && o.lr > 0, "bad training options");
+  AdamOptions ao;
+  ao.lr = o.lr;
+  ao.beta1 = 0.9;
+  ao.beta2 = 0.999;
+  Adam adam(net.parameters(), ao);
+  Generator rng(o.seed);
+  TrainingResult result;
+  Checkpoint ck;
+  ck.key = o.resume_key;
+  if (load_checkpoint(o.checkpoint_dir, net, adam, ck)) {
+    rng.set_state(ck.rng_state);
+    result.epoch_losses = ck.losses;
+    result.skipped_steps = ck.skipped;
+    result.resumed_from_epoch = ck.epoch;
+    spdlog::info("training: resuming from the checkpoint after epoch {} in {}", ck.epoch,
+                 o.checkpoint_dir.string());
+  }
+  GeometricLossOptions lo;
+  lo.lambda_disparity = o.lambda_disparity;
+  const NanLossFault nan_fault = nan_loss_fault_from_env();
+  net.train(true);
+  std::vector<size_t> order(pairs.size());
+  int steps_per_epoch = static_cast<int>((pairs.size() + o.batch_pairs - 1) / o.batch_pairs);
+  for (int epoch = ck.epoch; epoch < o.epochs; ++epoch) {
+    for (size_t k = 0; k < order.size(); ++k) order[k] = k;
+    std::shuffle(order.begin(), order.end(), rng.engine());
+    double sum = 0;
+    int counted = 0;
+    for (int s = 0; s < steps_per_epoch; ++s) {
+      if (o.cancelled && o.cancelled()) fail(ErrorCategory::cancelled, "training cancelled");
+      std::vector<const TrainingPair*> batch;
+      for (size_t k = s * o.batch_pairs; k < std::min(order.size(), size_t(s + 1) * o.batch_pairs);
+           ++k)
+        batch.push_back(&pairs[order[k]]);
+      adam.zero_grad();
+      Tensor loss = batch_loss(batch_depths(net, load_frame, batch), batch, lo);
+      double v = loss.item();
+      if (nan_fault.hits(epoch * steps_per_epoch + s + 1))
+        v = std::numeric_limits<double>::quiet_NaN();
+      if (!std::isfinite(v)) {
+        ++result.skipped_steps;
+        spdlog::warn("training: epoch {} step {}: non-finite loss, step skipped", epoch + 1, s + 1);
+        continue;
+      }
+      loss.backward();
+      adam.step();
+      ++result.steps;
+      sum += v;
+      ++counted;
+      if (o.on_step) o.on_step(epoch + 1, s + 1, steps_per_epoch, sum / counted);
+    }
+    if (counted == 0)
+      fail(ErrorCategory::numerical,
+           "training diverged: every step of epoch {} had a non-finite loss ({} steps skipped in "
+           "all); try a lower --lr, or check the poses and flow",
+           epoch + 1, result.skipped_steps);
+    double mean_loss = sum / counted;
+    result.epoch_losses.push_back(mean_loss);
+    if (o.on_epoch) o.on_epoch(epoch + 1, mean_loss);
+    if (!o.checkpoint_dir.empty()) {
+      ck.epoch = epoch + 1;
+      ck.rng_state = rng.state();
+      ck.losses = result.epoch_losses;
+      ck.skipped = result.skipped_steps;
+      save_checkpoint(o.checkpoint_dir, net, adam, ck);
+    }
+    if (o.stop_after_epochs >= 0 && epoch + 1 >= o.stop_after_epochs) break;
+  }
+  return result;
+}
+
+double evaluate_geometric_loss(DepthNet& net, const std::function<Tensor(int)>& load_frame,
+                               const std::vector<TrainingPair>& pairs, double lambda_disparity) {
+  NoGradGuard ng;
+  bool was_training = net.is_training();
+  net.eval();
+  GeometricLossOptions lo;
+  lo.lambda_disparity = lambda_disparity;
+  std::map<int, Tensor> cache;
+  double sum = 0;
+  for (const auto& p : pairs) {
+    for (int f : {p.i, p.j})
+      if (!cache.count(f)) cache[f] = net.depth(load_frame(f).unsqueeze(0)).squeeze(0).squeeze(0);
+    sum += geometric_loss_pair(cache[p.i], cache[p.j], p.ij, p.ji, lo).total.item();
+  }
+  net.train(was_training);
+  return pairs.empty() ? 0.0 : sum / static_cast<double>(pairs.size());
+}
+
+}  // namespace cvd

@@ -1,0 +1,59 @@
+// Test-time training (paper section 4.3): fine-tunes a depth network on one video with the
+// geometric loss over sampled frame pairs. Adam, batches of pairs, BatchNorm in train mode,
+// seeded shuffling, non-finite losses skipped and counted, a checkpoint after every epoch and
+// resumption from the last one.
+#pragma once
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "models/depth_net.h"
+#include "pipeline/training/geometric_loss.h"
+
+namespace cvd {
+
+struct TrainingPair {
+  int i = 0, j = 0;      // frame indices
+  PairDirection ij, ji;  // constants of both directions at the depth resolution
+};
+
+struct TrainingOptions {
+  int epochs = 20;
+  int batch_pairs = 4;
+  double lr = 4e-4;
+  double lambda_disparity = 0.1;
+  uint64_t seed = 1;
+  // Where checkpoints go (empty: none). A rerun with the same directory resumes.
+  std::filesystem::path checkpoint_dir;
+  // What the checkpoint must have been made with (the caller's settings, serialised): a
+  // checkpoint with another key is ignored and training starts over. `epochs` is not part of it,
+  // so a rerun with more epochs continues.
+  std::string resume_key;
+  // Progress: (epoch, step, steps per epoch, running mean loss of the epoch).
+  std::function<void(int, int, int, double)> on_step;
+  // Called after each epoch with (epoch, mean loss).
+  std::function<void(int, double)> on_epoch;
+  // Polled between steps; returning true stops with Error(cancelled).
+  std::function<bool()> cancelled;
+  // Test hook: stop (as if killed) after this many completed epochs; <0 = never.
+  int stop_after_epochs = -1;
+};
+
+struct TrainingResult {
+  std::vector<double> epoch_losses;  // mean loss per completed epoch (all epochs, resumed too)
+  int skipped_steps = 0;             // steps skipped for a non-finite loss
+  int resumed_from_epoch = 0;        // 0 = fresh start
+  int steps = 0;                     // optimizer steps taken in this call
+};
+
+// `load_frame(k)` returns frame k as RGB in [0, 1], [3, H, W] f32; `pairs` index into frames.
+TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& load_frame,
+                               const std::vector<TrainingPair>& pairs,
+                               const TrainingOptions& options);
+
+// Mean geometric loss over all pairs with the network as it is (eval mode, no gradients).
+double evaluate_geometric_loss(DepthNet& net, const std::function<Tensor(int)>& load_frame,
+                               const std::vector<TrainingPair>& pairs, double lambda_disparity);
+
+}  // namespace cvd

@@ -29,6 +29,9 @@ class DepthNet : public Module {
   // The final layer's bias (one element), used to set the initial depth level of an untrained
   // network (e.g. log of the scene's median depth for Mannequin).
   virtual Tensor output_bias() = 0;
+  // The final layer's weight: zeroed with the bias set, the network predicts a flat plane
+  // (pipeline/training/network_start.h).
+  virtual Tensor output_weight() = 0;
 
   // Module name prefixes in the order forward_raw first runs them, for matching the layers of
   // an imported graph by structure (tools/convert/onnx_weights.h). A prefix stands for all layers under

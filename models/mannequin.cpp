@@ -187,5 +187,6 @@ Tensor MannequinNet::forward_raw(const Tensor& x) {
 Tensor MannequinNet::confidence(const Tensor& x) { return uncertainty_->forward(seq_->forward(x)); }
 
 Tensor MannequinNet::output_bias() { return pred_->bias; }
+Tensor MannequinNet::output_weight() { return pred_->weight; }
 
 }  // namespace cvd

@@ -24,6 +24,7 @@ class MannequinNet : public DepthNet {
   Tensor normalize_input(const Tensor& rgb01) const override { return rgb01; }
   Tensor forward_raw(const Tensor& x) override;
   Tensor output_bias() override;
+  Tensor output_weight() override;
   std::string type_name() const override { return "HourglassModel"; }
   // The forward returns (pred, confidence): pred_layer runs before uncertainty_layer.
   std::vector<std::string> execution_order() const override {

@@ -196,5 +196,6 @@ Tensor MidasSmallNet::forward_raw(const Tensor& x) {
 }
 
 Tensor MidasSmallNet::output_bias() { return parts_->output_layer->bias; }
+Tensor MidasSmallNet::output_weight() { return parts_->output_layer->weight; }
 
 }  // namespace cvd

@@ -159,5 +159,6 @@ Tensor MidasV2Net::forward_raw(const Tensor& x) {
 }
 
 Tensor MidasV2Net::output_bias() { return parts_->output_layer->bias; }
+Tensor MidasV2Net::output_weight() { return parts_->output_layer->weight; }
 
 }  // namespace cvd

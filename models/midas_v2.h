@@ -29,6 +29,7 @@ class MidasV2Net : public DepthNet {
   Tensor normalize_input(const Tensor& rgb01) const override;
   Tensor forward_raw(const Tensor& x) override;
   Tensor output_bias() override;
+  Tensor output_weight() override;
   // See midas_decoder_execution_order (models/midas_blocks.h).
   std::vector<std::string> execution_order() const override {
     return midas_decoder_execution_order();

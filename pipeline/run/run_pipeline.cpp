@@ -25,6 +25,7 @@
 #include "pipeline/io/pfm_io.h"
 #include "pipeline/run/run_outputs.h"
 #include "pipeline/run/run_stages.h"
+#include "pipeline/training/network_start.h"
 #include "pipeline/training/test_time_training.h"
 
 namespace cvd {
@@ -73,11 +74,6 @@ std::unique_ptr<DepthNet> load_network(const RunOptions& o, std::string& descrip
   return net;
 }
 
-// Projected sparse points of one frame: pixel (u, v) at the depth resolution and depth z.
-struct SparseDepth {
-  std::vector<double> u, v, z;
-};
-
 SparseDepth project_points(const FrameCamera& c, const std::vector<Eigen::Vector3d>& pts) {
   SparseDepth s;
   const Intrinsics& K = c.intrinsics;
@@ -91,75 +87,6 @@ SparseDepth project_points(const FrameCamera& c, const std::vector<Eigen::Vector
     s.z.push_back(p.z());
   }
   return s;
-}
-
-double median_of(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
-}
-
-// Sets the untrained network's output level to the scene's median sparse depth and fits the
-// sparse depths for a few steps (mean |log D - log z| at the projected points).
-void initialise_default_network(DepthNet& net, const std::function<Tensor(int)>& load_frame,
-                                const std::vector<SparseDepth>& sparse, const RunOptions& o,
-                                json& info) {
-  std::vector<double> all;
-  for (auto& s : sparse) all.insert(all.end(), s.z.begin(), s.z.end());
-  CVD_CHECK(!all.empty(), "no sparse 3-D points to initialise the default network's depth level");
-  double med = median_of(all);
-  {
-    NoGradGuard ng;
-    Tensor b = net.output_bias();
-    double level = net.output_kind() == DepthOutputKind::log_depth ? std::log(med) : 1.0 / med;
-    b.fill_(level);
-  }
-  info["initial_depth_level"] = med;
-  std::vector<int> frames;
-  for (size_t k = 0; k < sparse.size(); ++k)
-    if (sparse[k].z.size() >= 8) frames.push_back(static_cast<int>(k));
-  if (o.warmup_steps <= 0 || frames.empty()) return;
-  AdamOptions ao;
-  ao.lr = o.lr > 0 ? o.lr : default_learning_rate(net.arch());
-  Adam adam(net.parameters(), ao);
-  Generator rng(o.seed + 17);
-  net.train(true);
-  double last = 0;
-  for (int step = 0; step < o.warmup_steps; ++step) {
-    std::vector<int> batch;
-    for (int b = 0; b < std::min<int>(4, static_cast<int>(frames.size())); ++b)
-      batch.push_back(frames[rng.randint(0, static_cast<int64_t>(frames.size()))]);
-    std::vector<Tensor> imgs;
-    for (int f : batch) imgs.push_back(load_frame(f).unsqueeze(0));
-    Tensor depth = net.depth(concat(imgs, 0));
-    int64_t H = depth.size(2), W = depth.size(3);
-    Tensor loss;
-    for (size_t b = 0; b < batch.size(); ++b) {
-      const SparseDepth& s = sparse[batch[b]];
-      int64_t n = static_cast<int64_t>(s.z.size());
-      std::vector<double> g(2 * n), lz(n);
-      for (int64_t k = 0; k < n; ++k) {
-        g[2 * k] = 2.0 * s.u[k] / std::max<int64_t>(W - 1, 1) - 1.0;
-        g[2 * k + 1] = 2.0 * s.v[k] / std::max<int64_t>(H - 1, 1) - 1.0;
-        lz[k] = std::log(s.z[k]);
-      }
-      Tensor grid = Tensor::from_vector(g, {1, 1, n, 2});
-      Tensor d = grid_sample(depth.narrow(0, static_cast<int64_t>(b), 1), grid,
-                             GridSampleParams{GridPadding::border, true})
-                     .reshape({n});
-      Tensor l = mean(abs(sub(log(d), Tensor::from_vector(lz, {n}))));
-      loss = loss.defined() ? add(loss, l) : l;
-    }
-    loss = mul_scalar(loss, 1.0 / static_cast<double>(batch.size()));
-    adam.zero_grad();
-    last = loss.item();
-    if (!std::isfinite(last)) continue;
-    loss.backward();
-    adam.step();
-    if (o.progress)
-      o.progress({"warm-up", step + 1, o.warmup_steps, fmt::format("log-depth L1 {:.4f}", last)});
-  }
-  info["warmup_final_loss"] = last;
 }
 
 std::vector<cv::Mat> infer_depths(DepthNet& net, const std::function<Tensor(int)>& load_frame,
@@ -289,10 +216,23 @@ RunResult run_pipeline(const RunOptions& o) {
     if (cams[k].registered) sparse[k] = project_points(cams[k], points[k]);
   json calib;
   if (o.model.empty()) {
-    initialise_default_network(*net, load_frame, sparse, o, calib);
+    NetworkStartOptions so;
+    so.warmup_steps = o.warmup_steps;
+    so.lr = o.lr > 0 ? o.lr : default_learning_rate(net->arch());
+    so.seed = o.seed;
+    so.scale_free_per_frame = !have_sfm_points;
+    if (o.progress) {
+      so.progress = [&](int step, int steps, const std::string& detail) {
+        o.progress({"warm-up", step, steps, detail});
+      };
+    }
+    std::vector<std::string> start_warnings;
+    calib = start_default_network(*net, load_frame, sparse, so, &start_warnings);
+    if (!start_warnings.empty()) calib["warnings"] = start_warnings;
     calib["method"] =
-        "default network: output level set to the median sparse depth, then warm-up "
-        "on sparse depths; poses keep their units";
+        "default network: a flat plane at the median sparse depth (zero output head), then a "
+        "warm-up on sparse depths kept as far as it beats the plane on held-out points; poses "
+        "keep their units";
   }
   std::vector<cv::Mat> initial = infer_depths(*net, load_frame, n, o, "initial depth");
   if (!o.model.empty()) {

@@ -165,6 +165,39 @@ TEST_F(TinyClip, KilledDuringTrainingResumesToTheSameDepth) {
   std::printf("[resume] %d depth maps, largest relative difference %.3g\n", files, worst);
 }
 
+TEST_F(TinyClip, InterruptPrintsWhatWasKeptAndASecondRunOnTheFolderIsRefused) {
+  // Many epochs, so the run is still training when it is interrupted.
+  fs::path out = work() / "interrupted";
+  const fs::path log = work() / "interrupted.log";
+  pid_t pid = spawn_cvd(run_args(out, 500), log);
+  ASSERT_GT(pid, 0);
+  fs::path index = out / "cache" / "training" / "checkpoint.json";
+  int status = 0;
+  auto t0 = std::chrono::steady_clock::now();
+  while (!fs::exists(index)) {
+    ASSERT_NE(waitpid(pid, &status, WNOHANG), pid) << "cvd ended early:\n" << slurp(log);
+    ASSERT_LT(std::chrono::steady_clock::now() - t0, std::chrono::minutes(10)) << "no checkpoint";
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  // A second run on the same folder fails at once (exit 4), naming the first.
+  CommandResult second = run_cvd(run_args(out, 500));
+  EXPECT_EQ(second.exit_code, 4) << second.output;
+  EXPECT_NE(second.output.find("in use by process " + std::to_string(pid)), std::string::npos)
+      << second.output;
+  // Ctrl-C: exit 130, what was kept and the command that resumes.
+  kill(pid, SIGINT);
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFEXITED(status)) << slurp(log);
+  EXPECT_EQ(WEXITSTATUS(status), 130) << slurp(log);
+  const std::string text = slurp(log);
+  EXPECT_NE(text.find("interrupted; kept in"), std::string::npos) << text;
+  EXPECT_NE(text.find("training checkpoint after epoch"), std::string::npos) << text;
+  EXPECT_NE(text.find("rerun the same command to resume: " + cli_path() + " run "),
+            std::string::npos)
+      << text;
+  EXPECT_FALSE(fs::exists(out / "run.json"));
+}
+
 TEST_F(TinyClip, ARerunWithOtherTrainingSettingsStartsOverAndMoreEpochsContinue) {
   fs::path out = work() / "settings";
   CommandResult r = run_cvd(run_args(out, 1));

@@ -18,10 +18,12 @@
 #include "models/depth_net_architectures.h"
 #include "pipeline/eval/eval_sparse.h"
 #include "pipeline/flow/user_masks.h"
+#include "pipeline/geometry/flow_tracks.h"
 #include "pipeline/geometry/flow_triangulation.h"
 #include "pipeline/geometry/scale_calibration.h"
 #include "pipeline/io/atomic_file.h"
 #include "pipeline/io/frame_source.h"
+#include "pipeline/io/output_lock.h"
 #include "pipeline/io/pfm_io.h"
 #include "pipeline/run/run_outputs.h"
 #include "pipeline/run/run_stages.h"
@@ -150,6 +152,8 @@ RunResult run_pipeline(const RunOptions& o) {
   if (ec || !fs::is_directory(o.out))
     fail(ErrorCategory::io, "{}: cannot create the output directory ({})", o.out.string(),
          ec ? ec.message() : "a file of that name exists");
+  // One run per output folder: a second one fails here, before touching anything.
+  const OutputFolderLock lock(o.out);
   fs::path cache = o.out / "cache";
   json info = {
       {"version", CVD_VERSION}, {"input", o.input.string()}, {"backends", compiled_backends()}};
@@ -204,10 +208,30 @@ RunResult run_pipeline(const RunOptions& o) {
   std::vector<std::vector<Eigen::Vector3d>> points = poses.points;
   bool have_sfm_points = false;
   for (auto& p : points) have_sfm_points |= !p.empty();
-  if (!have_sfm_points)
+  json sparse_info;
+  if (!have_sfm_points) {
+    // Tracks through the consecutive-frame flows: one point per track, seen by every frame of it,
+    // so the frames' sparse depths share one scale. Pair-by-pair triangulation only when no
+    // track could be triangulated (e.g. a clip with consecutive pairs dropped).
+    std::vector<cv::Mat> next_flow(static_cast<size_t>(n)), next_mask(static_cast<size_t>(n));
     for (const auto& p : flow.pairs)
-      triangulate_flow_points(cams[p.pair.first], cams[p.pair.second], p.pair.first, p.pair.second,
-                              p.forward, p.forward_mask, points);
+      if (p.pair.second == p.pair.first + 1) {
+        next_flow[size_t(p.pair.first)] = p.forward;
+        next_mask[size_t(p.pair.first)] = p.forward_mask;
+      }
+    const FlowTrackStats ts = triangulate_flow_tracks(cams, next_flow, next_mask, points);
+    sparse_info = {{"method", "flow tracks"}, {"tracks", ts.tracks}, {"kept", ts.kept}};
+    spdlog::info("sparse points: {} of {} flow tracks triangulated", ts.kept, ts.tracks);
+    if (ts.kept == 0) {
+      int kept = 0;
+      for (const auto& p : flow.pairs)
+        kept += triangulate_flow_points(cams[p.pair.first], cams[p.pair.second], p.pair.first,
+                                        p.pair.second, p.forward, p.forward_mask, points);
+      sparse_info = {{"method", "flow pairs (no track could be triangulated)"}, {"kept", kept}};
+      spdlog::warn("sparse points: no flow track could be triangulated; {} points from pairs",
+                   kept);
+    }
+  }
 
   // 6. Initial depth, scale calibration / default-network initialisation
   t = Clock::now();
@@ -220,7 +244,9 @@ RunResult run_pipeline(const RunOptions& o) {
     so.warmup_steps = o.warmup_steps;
     so.lr = o.lr > 0 ? o.lr : default_learning_rate(net->arch());
     so.seed = o.seed;
-    so.scale_free_per_frame = !have_sfm_points;
+    // Points triangulated pair by pair drift in scale from frame to frame: fit them up to one
+    // scale per frame. SfM points and flow-track points share one scale across frames.
+    so.scale_free_per_frame = sparse_info.value("method", "") != "flow tracks" && !have_sfm_points;
     if (o.progress) {
       so.progress = [&](int step, int steps, const std::string& detail) {
         o.progress({"warm-up", step, steps, detail});
@@ -363,6 +389,7 @@ RunResult run_pipeline(const RunOptions& o) {
     info["sparse_points"] = {{"source", have_sfm_points ? "sfm" : "flow triangulation"},
                              {"observations", count},
                              {"file", "sparse_depth.csv"}};
+    if (!sparse_info.is_null()) info["sparse_points"]["triangulation"] = sparse_info;
   }
   info["pairs"] = {{"kept", res.num_pairs}, {"dropped", flow.dropped}};
   info["training"] = {{"epochs", o.epochs},

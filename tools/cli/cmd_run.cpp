@@ -1,7 +1,13 @@
 // `cvd run INPUT -o OUT`: the whole pipeline on a video or a folder of frames.
 #include <fmt/format.h>
 
+#include <fmt/ranges.h>
 #include <spdlog/spdlog.h>
+
+#include <atomic>
+#include <csignal>
+#include <fstream>
+#include <nlohmann/json.hpp>
 
 #include "engine/error.h"
 #include "pipeline/eval/eval_run.h"
@@ -49,6 +55,45 @@ void evaluate_against_ground_truth(const RunOptions& o) {
   fmt::print("evaluation in {}\n", (o.out / "eval").string());
 }
 
+// Ctrl-C / SIGTERM: the first asks the pipeline to stop at its next check (the caches and the
+// last epoch's checkpoint stay); a second ends the process at once.
+std::atomic<bool> g_interrupted{false};
+
+extern "C" void on_interrupt(int) {
+  g_interrupted.store(true);
+  std::signal(SIGINT, SIG_DFL);
+  std::signal(SIGTERM, SIG_DFL);
+}
+
+// What an interrupted run leaves in OUT/cache, and how to go on from it.
+void print_resume_hint(const RunOptions& o, const std::vector<std::string>& argv) {
+  namespace fs = std::filesystem;
+  const fs::path cache = o.out / "cache";
+  std::vector<std::string> kept;
+  std::error_code ec;
+  if (fs::is_directory(cache / "frames", ec)) kept.push_back("frames");
+  if (fs::exists(cache / "colmap" / "result_model" / "images.txt", ec))
+    kept.push_back("COLMAP poses");
+  int flows = 0;
+  for (const auto& e : fs::directory_iterator(cache / "flow", ec))
+    if (e.path().string().ends_with(".fwd.flo")) ++flows;
+  if (flows > 0) kept.push_back(fmt::format("{} flow pairs", flows));
+  try {
+    std::ifstream in(cache / "training" / "checkpoint.json");
+    if (in) {
+      const nlohmann::json j = nlohmann::json::parse(in);
+      kept.push_back(fmt::format("training checkpoint after epoch {}", j.at("epoch").get<int>()));
+    }
+  } catch (const std::exception&) {
+  }
+  std::string cmd;
+  for (const std::string& a : argv) cmd += (cmd.empty() ? "" : " ") + a;
+  fmt::print(
+      stderr, "\ncvd run: interrupted; kept in {}: {}\nrerun the same command to resume: {}\n",
+      cache.string(),
+      kept.empty() ? std::string("nothing yet") : fmt::format("{}", fmt::join(kept, ", ")), cmd);
+}
+
 const CommandRegistration reg(20, [](CLI::App& app) {
   auto st = std::make_shared<RunCommand>();
   CLI::App* c =
@@ -65,7 +110,19 @@ const CommandRegistration reg(20, [](CLI::App& app) {
            st->o.gt.string());
     ProgressBar bar(global_options().quiet);
     st->o.progress = [&](const RunProgress& p) { bar.update(p); };
-    RunResult r = run_pipeline(st->o);
+    st->o.cancel = &g_interrupted;
+    std::signal(SIGINT, on_interrupt);
+    std::signal(SIGTERM, on_interrupt);
+    RunResult r;
+    try {
+      r = run_pipeline(st->o);
+    } catch (const Error& e) {
+      if (e.category() == ErrorCategory::cancelled && g_interrupted.load()) {
+        bar.finish();
+        print_resume_hint(st->o, global_options().argv);
+      }
+      throw;
+    }
     bar.finish();
     print_summary(r, st->o);
     if (!st->o.gt.empty()) evaluate_against_ground_truth(st->o);

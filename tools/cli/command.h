@@ -13,6 +13,7 @@ namespace cvd::cli {
 struct GlobalOptions {
   bool quiet = false;
   bool verbose = false;
+  std::vector<std::string> argv;  // the command line as given (for "rerun ..." hints)
 };
 GlobalOptions& global_options();
 

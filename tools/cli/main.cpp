@@ -63,8 +63,11 @@ int main(int argc, char** argv) {
     return v;
   });
   auto& g = global_options();
+  g.argv.assign(argv, argv + argc);
   app.add_flag("-q,--quiet", g.quiet, "Only print errors and the final summary");
   app.add_flag("-v,--verbose", g.verbose, "Print debug detail");
+  // Every --help shows each flag's default (subcommands inherit this when they are created).
+  app.option_defaults()->always_capture_default(true);
   auto cmds = registered_commands();
   std::sort(cmds.begin(), cmds.end(), [](auto& a, auto& b) { return a.order < b.order; });
   for (auto& c : cmds) c.setup(app);

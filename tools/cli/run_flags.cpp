@@ -1,11 +1,12 @@
 #include "tools/cli/run_flags.h"
 
+#include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
 #include <sstream>
 
 #include "engine/error.h"
-#include "models/depth_net.h"
+#include "models/depth_net_architectures.h"
 #include "tools/cli/command.h"
 
 namespace cvd::cli {
@@ -51,9 +52,16 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s) {
   c->add_option("--epochs", o.epochs, "Training epochs");
   c->add_option("--batch", o.batch_pairs, "Frame pairs per training step")
       ->check(CLI::PositiveNumber);
-  c->add_option("--lr", o.lr, "Learning rate (default per architecture)");
+  // The per-architecture defaults, from the architecture table.
+  std::string lr_defaults, lambda_defaults;
+  for (const cvd::DepthNetArchitecture& a : cvd::depth_net_architectures()) {
+    lr_defaults += fmt::format("{}{} {:g}", lr_defaults.empty() ? "" : ", ", a.name, a.default_lr);
+    lambda_defaults +=
+        fmt::format("{}{} {:g}", lambda_defaults.empty() ? "" : ", ", a.name, a.default_lambda);
+  }
+  c->add_option("--lr", o.lr, "Learning rate; <= 0: per architecture (" + lr_defaults + ")");
   c->add_option("--lambda", o.lambda_disparity,
-                "Weight of the disparity term (default per architecture)");
+                "Weight of the disparity term; < 0: per architecture (" + lambda_defaults + ")");
   c->add_option("--seed", o.seed, "Random seed");
   c->add_option("--warmup", o.warmup_steps, "Sparse-depth warm-up steps of the default network");
   c->add_option("--precision", o.precision,

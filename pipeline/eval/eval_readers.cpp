@@ -11,6 +11,7 @@
 
 #include "engine/error.h"
 #include "pipeline/io/image_io.h"
+#include "pipeline/io/npy_io.h"
 #include "pipeline/io/pfm_io.h"
 #include "pipeline/io/trajectory_io.h"
 
@@ -117,10 +118,28 @@ EvalSequence read_cvd_run(const fs::path& dir, const std::string& depth_subdir) 
   seq.root = dir;
   seq.layout = "cvd-run";
   auto depths = list_files(dir / depth_subdir, {".pfm"});
-  if (depths.empty())
+  std::map<std::string, fs::path> by_name;
+  std::map<std::string, int64_t> npy_index;  // a run written with --formats npy only
+  if (depths.empty() && depth_subdir == "depth" && fs::exists(dir / "depth.npy")) {
+    std::ifstream names(dir / "frames.txt");
+    if (!names)
+      fail(ErrorCategory::format, "{}: depth.npy without frames.txt (the frame of each map)",
+           dir.string());
+    const NpyStackInfo info = read_npy_stack_info(dir / "depth.npy");
+    std::string name;
+    int64_t k = 0;
+    while (std::getline(names, name))
+      if (!name.empty()) {
+        by_name[name] = dir / "depth.npy";
+        npy_index[name] = k++;
+      }
+    if (k != info.frames)
+      fail(ErrorCategory::format, "{}: frames.txt names {} frames but depth.npy holds {}",
+           dir.string(), k, info.frames);
+  } else if (depths.empty()) {
     fail(ErrorCategory::format, "{}: no {}/*.pfm files (not a cvd run directory?)", dir.string(),
          depth_subdir);
-  std::map<std::string, fs::path> by_name;
+  }
   for (auto& p : depths) by_name[p.stem().string()] = p;
   std::vector<std::pair<std::string, std::optional<double>>> order;
   fs::path run_json = dir / "run.json";
@@ -155,6 +174,7 @@ EvalSequence read_cvd_run(const fs::path& dir, const std::string& depth_subdir) 
     f.timestamp = ts;
     auto it = by_name.find(name);
     if (it != by_name.end()) f.depth_path = it->second;
+    if (auto n = npy_index.find(name); n != npy_index.end()) f.npy_index = n->second;
     seq.frames.push_back(f);
   }
   if (fs::exists(dir / "poses.txt")) attach_poses_in_order(seq, dir / "poses.txt");
@@ -318,6 +338,7 @@ cv::Mat load_eval_depth(const EvalFrame& frame) {
     fail(ErrorCategory::invalid_argument, "frame '{}' has no depth file", frame.name);
   std::string ext = frame.depth_path.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(), ::tolower);
+  if (ext == ".npy") return read_npy_frame(frame.depth_path, frame.npy_index);
   if (ext == ".pfm") {
     cv::Mat d = read_pfm(frame.depth_path);
     if (d.channels() != 1)

@@ -41,6 +41,7 @@ struct EvalFrame {
   double depth_scale = 1.0;          // metres per stored unit (PNG); 1 for PFM
   std::filesystem::path image_path;  // RGB, empty when unknown
   std::optional<Pose> pose;          // camera-to-world
+  int64_t npy_index = -1;            // the frame's index in depth_path when that is a .npy stack
 };
 
 struct EvalSequence {

@@ -64,6 +64,9 @@ struct RunOptions {
   std::string precision = "f32";
 
   // Outputs
+  // Depth map formats: "pfm" (depth/), "png16" (depth_png16/), "color" (depth_color/), "npy"
+  // (depth.npy, N x H x W float32, with frames.txt).
+  std::vector<std::string> depth_formats = {"pfm", "png16", "color"};
   bool write_videos = true;
   bool write_point_cloud = true;
 

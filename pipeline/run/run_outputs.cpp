@@ -11,6 +11,7 @@
 
 #include "engine/error.h"
 #include "pipeline/io/atomic_file.h"
+#include "pipeline/io/npy_io.h"
 #include "pipeline/io/pfm_io.h"
 #include "pipeline/io/trajectory_io.h"
 
@@ -57,8 +58,17 @@ cv::Mat colorize_depth(const cv::Mat& depth, std::pair<double, double> r) {
   return color;
 }
 
-void write_depth_maps(const fs::path& out, const RunOutputs& r) {
-  for (const char* d : {"depth", "depth_png16", "depth_color"}) fs::create_directories(out / d);
+void write_depth_maps(const fs::path& out, const RunOutputs& r,
+                      const std::vector<std::string>& formats) {
+  auto wants = [&](const char* f) {
+    return std::find(formats.begin(), formats.end(), f) != formats.end();
+  };
+  for (const std::string& f : formats)
+    CVD_CHECK(f == "pfm" || f == "png16" || f == "color" || f == "npy",
+              "unknown depth format '{}' (expected pfm, png16, color or npy)", f);
+  if (wants("pfm")) fs::create_directories(out / "depth");
+  if (wants("png16")) fs::create_directories(out / "depth_png16");
+  if (wants("color")) fs::create_directories(out / "depth_color");
   double max_depth = 0;
   for (const auto& d : r.depths) {
     double mn, mx;
@@ -68,17 +78,28 @@ void write_depth_maps(const fs::path& out, const RunOutputs& r) {
   double per_unit = max_depth > 0 ? max_depth / 65535.0 : 1.0;
   auto range = video_inverse_depth_range(r.depths);
   for (size_t k = 0; k < r.names.size(); ++k) {
-    write_pfm(out / "depth" / (r.names[k] + ".pfm"), r.depths[k]);
-    cv::Mat u16;
-    r.depths[k].convertTo(u16, CV_16U, 1.0 / per_unit);
-    write_png(out / "depth_png16" / (r.names[k] + ".png"), u16);
-    write_png(out / "depth_color" / (r.names[k] + ".png"), colorize_depth(r.depths[k], range));
+    if (wants("pfm")) write_pfm(out / "depth" / (r.names[k] + ".pfm"), r.depths[k]);
+    if (wants("png16")) {
+      cv::Mat u16;
+      r.depths[k].convertTo(u16, CV_16U, 1.0 / per_unit);
+      write_png(out / "depth_png16" / (r.names[k] + ".png"), u16);
+    }
+    if (wants("color"))
+      write_png(out / "depth_color" / (r.names[k] + ".png"), colorize_depth(r.depths[k], range));
   }
-  nlohmann::json s = {{"depth_per_unit", per_unit},
-                      {"formula", "depth = value * depth_per_unit; value 0 = invalid"},
-                      {"units", "the run's pose units (see run.json)"},
-                      {"color_inverse_depth_range", {range.first, range.second}}};
-  write_text_file(out / "depth_png16" / "scale.json", s.dump(2));
+  if (wants("png16")) {
+    nlohmann::json s = {{"depth_per_unit", per_unit},
+                        {"formula", "depth = value * depth_per_unit; value 0 = invalid"},
+                        {"units", "the run's pose units (see run.json)"},
+                        {"color_inverse_depth_range", {range.first, range.second}}};
+    write_text_file(out / "depth_png16" / "scale.json", s.dump(2));
+  }
+  if (wants("npy")) {
+    write_npy_stack(out / "depth.npy", r.depths);
+    std::string names;
+    for (const std::string& n : r.names) names += n + "\n";
+    write_text_file(out / "frames.txt", names);
+  }
 }
 
 void write_cameras(const fs::path& out, const RunOutputs& r) {
@@ -155,7 +176,8 @@ const std::vector<std::string>& run_output_names() {
   static const std::vector<std::string> names = {
       "depth",     "depth_png16",      "depth_color",      "depth_initial",
       "poses.txt", "colmap",           "intrinsics.json",  "points.ply",
-      "depth.mp4", "side_by_side.mp4", "sparse_depth.csv", "run.json"};
+      "depth.mp4", "side_by_side.mp4", "sparse_depth.csv", "run.json",
+      "depth.npy", "frames.txt"};
   return names;
 }
 

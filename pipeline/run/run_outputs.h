@@ -29,7 +29,9 @@ struct RunOutputs {
   double fps = 30;
 };
 
-void write_depth_maps(const std::filesystem::path& out, const RunOutputs& r);
+// The depth maps in each of `formats` ("pfm", "png16", "color", "npy"; see RunOptions).
+void write_depth_maps(const std::filesystem::path& out, const RunOutputs& r,
+                      const std::vector<std::string>& formats = {"pfm", "png16", "color"});
 void write_cameras(const std::filesystem::path& out, const RunOutputs& r);
 void write_point_cloud(const std::filesystem::path& file, const RunOutputs& r, int pixel_step = 4,
                        int frame_step = 2);

@@ -31,10 +31,16 @@ void print_summary(const RunResult& r, const RunOptions& o) {
              reg, r.num_pairs, r.num_pairs_dropped);
   fmt::print("geometric loss: {:.4f} before training -> {:.4f} after\n", r.initial_loss,
              r.final_loss);
+  std::string depth;
+  for (const std::string& f : o.depth_formats)
+    depth += f == "pfm"     ? "depth/ "
+             : f == "png16" ? "depth_png16/ "
+             : f == "color" ? "depth_color/ "
+                            : "depth.npy frames.txt ";
   fmt::print(
-      "outputs in {}: depth/ depth_initial/ depth_png16/ depth_color/ poses.txt colmap/ "
-      "intrinsics.json sparse_depth.csv{}{} run.json\n",
-      o.out.string(), o.write_point_cloud ? " points.ply" : "",
+      "outputs in {}: {}depth_initial/ poses.txt colmap/ intrinsics.json sparse_depth.csv{}{} "
+      "run.json\n",
+      o.out.string(), depth, o.write_point_cloud ? " points.ply" : "",
       o.write_videos ? " depth.mp4 side_by_side.mp4" : "");
 }
 

@@ -69,6 +69,11 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s) {
       ->check(CLI::IsMember({"f32", "bf16"}));
   c->add_flag("!--no-videos", o.write_videos, "Do not write depth.mp4 and side_by_side.mp4");
   c->add_flag("!--no-ply", o.write_point_cloud, "Do not write points.ply");
+  c->add_option("--formats", o.depth_formats,
+                "Depth map formats, comma-separated: pfm (depth/), png16 (depth_png16/), color "
+                "(depth_color/), npy (depth.npy: N x H x W float32, with frames.txt)")
+      ->delimiter(',')
+      ->check(CLI::IsMember({"pfm", "png16", "color", "npy"}));
   c->add_option("--gt", o.gt, "Ground truth folder: evaluate the result against it");
 }
 

@@ -13,7 +13,7 @@ ROOT=$(cd "$(dirname "$0")/../.." && pwd)
 BUILD=${BUILD:-$ROOT/build-fuzz}
 CXX=${CXX:-clang++}
 JOBS=${JOBS:-2}
-ALL_TARGETS=(pfm flo onnx cvdw tum kitti intrinsics_json colmap_text)
+ALL_TARGETS=(pfm flo npy onnx cvdw tum kitti intrinsics_json colmap_text)
 TARGETS=("$@")
 [ ${#TARGETS[@]} -eq 0 ] && TARGETS=("${ALL_TARGETS[@]}")
 
@@ -29,6 +29,7 @@ sources_for() {
   case $1 in
     pfm) echo engine/error.cpp pipeline/io/atomic_file.cpp pipeline/io/pfm_io.cpp ;;
     flo) echo engine/error.cpp pipeline/io/atomic_file.cpp pipeline/io/flow_io.cpp ;;
+    npy) echo engine/error.cpp pipeline/io/atomic_file.cpp pipeline/io/npy_io.cpp ;;
     onnx) echo tools/convert/onnx_graph.cpp; (cd "$ROOT" && ls engine/*.cpp | tr '\n' ' ') ;;
     tum | kitti | intrinsics_json | colmap_text)
       echo engine/error.cpp pipeline/io/atomic_file.cpp pipeline/io/trajectory_io.cpp ;;
@@ -66,10 +67,14 @@ done
 
 # ---- seeds ----
 S=$BUILD/seeds
-mkdir -p "$S"/{pfm,flo,onnx,cvdw,tum,kitti,intrinsics_json,colmap_text}
+mkdir -p "$S"/{pfm,flo,npy,onnx,cvdw,tum,kitti,intrinsics_json,colmap_text}
 printf 'Pf\n2 2\n-1\n' > "$S/pfm/gray.pfm"; head -c 16 /dev/zero >> "$S/pfm/gray.pfm"
 printf 'PF\n1 2\n1.0\n' > "$S/pfm/rgb_be.pfm"; head -c 24 /dev/zero >> "$S/pfm/rgb_be.pfm"
 printf 'PIEH\x02\x00\x00\x00\x01\x00\x00\x00' > "$S/flo/two.flo"; head -c 16 /dev/zero >> "$S/flo/two.flo"
+npy_dict="{'descr': '<f4', 'fortran_order': False, 'shape': (2, 2, 3), }"
+npy_len=$(( (10 + ${#npy_dict} + 1 + 63) / 64 * 64 - 10 ))  # header padded to 64, ends in \n
+{ printf '\x93NUMPY\x01\x00'; printf "\\x$(printf %02x $((npy_len % 256)))\\x$(printf %02x $((npy_len / 256)))";
+  printf "%-$((npy_len - 1))s\n" "$npy_dict"; head -c 48 /dev/zero; } > "$S/npy/two.npy"
 cp "$ROOT"/tests/data/onnx/*.onnx "$S/onnx/"
 cp "$ROOT"/tests/data/onnx/*.cvdw "$S/cvdw/"
 cat > "$S/tum/poses.txt" <<'P'

@@ -8,6 +8,7 @@
 #include "engine/backend_info.h"
 #include "engine/error.h"
 #include "kernels/builtin_backends.h"
+#include "pipeline/run/dependency_versions.h"
 #include "tools/cli/command.h"
 
 namespace cvd::cli {
@@ -60,6 +61,8 @@ int main(int argc, char** argv) {
     std::string v = std::string("cvd ") + CVD_VERSION + "\ncompiled backends:";
     for (const std::string& b : cvd::compiled_backends()) v += "\n  " + b;
     v += "\nCUDA at run time: " + cvd::cuda_runtime_status();
+    v += "\ndependencies:";
+    for (const std::string& d : cvd::dependency_versions()) v += "\n  " + d;
     return v;
   });
   auto& g = global_options();

@@ -3,6 +3,9 @@
 // by headless Chromium.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <set>
+
 #include <Eigen/Geometry>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -585,7 +588,38 @@ TEST(EvalReport, RendersInHeadlessChromium) {
   };
   EXPECT_GE(count("<svg"), 7u);  // 2x2 depth plots, trajectory, ATE, flow pairs
   EXPECT_GE(count("<polyline"), 7u);
-  EXPECT_GE(count("data:image/png;base64,"), 8u);
+  EXPECT_GE(count("data:image/png;base64,"), 9u);  // 8 thumbnails and their colour bar
   EXPECT_NE(r.output.find("Sorted per-pixel AbsRel"), std::string::npos);
   EXPECT_NE(r.output.find("Trajectory, top view"), std::string::npos);
+  // The plots hold the aligned rows only (the unaligned ones set the axis and flattened them).
+  EXPECT_EQ(r.output.find(">none</text>"), std::string::npos);
+  EXPECT_NE(r.output.find(">median_frame</text>"), std::string::npos);
+  EXPECT_NE(r.output.find("depth colour bar"), std::string::npos);
+
+  // And as a person sees it: a screenshot with the plots' lines and the turbo thumbnails.
+  const fs::path shot = tmp / "report.png";
+  auto s = test::run_command(fmt::format(
+      "chromium --headless --no-sandbox --disable-gpu --disable-background-networking "
+      "--hide-scrollbars --user-data-dir={} --window-size=1200,2400 --screenshot={} file://{}",
+      (tmp / "profile2").string(), shot.string(), (tmp / "out" / "report.html").string()));
+  ASSERT_EQ(s.exit_code, 0) << s.output;
+  const cv::Mat img = cv::imread(shot.string(), cv::IMREAD_COLOR);
+  ASSERT_FALSE(img.empty()) << s.output;
+  // Distinct colours: a blank or text-only page has a few dozen greys at most; lines, legends
+  // and colour-mapped thumbnails give more than a hundred (measured: 191). Saturated pixels
+  // (the turbo thumbnails and their colour bar) cover over 1% of the page (measured: 2.0%).
+  std::set<int> colours;
+  size_t saturated = 0, sampled = 0;
+  for (int y = 0; y < img.rows; y += 2)
+    for (int x = 0; x < img.cols; x += 2) {
+      const cv::Vec3b p = img.at<cv::Vec3b>(y, x);
+      colours.insert((p[0] >> 3) << 10 | (p[1] >> 3) << 5 | (p[2] >> 3));
+      const int hi = std::max({p[0], p[1], p[2]}), lo = std::min({p[0], p[1], p[2]});
+      saturated += hi - lo > 100;
+      ++sampled;
+    }
+  EXPECT_GT(colours.size(), 100u);
+  EXPECT_GT(double(saturated) / double(sampled), 0.01);
+  std::printf("[report screenshot] %zu colours, %.1f%% saturated pixels\n", colours.size(),
+              100.0 * double(saturated) / double(sampled));
 }

@@ -126,6 +126,19 @@ std::string svg_line_plot(const std::string& title, const std::string& x_label,
   return o;
 }
 
+std::vector<unsigned char> depth_colour_bar_png(int width, int height) {
+  CVD_CHECK(width > 1 && height > 0, "depth_colour_bar_png: bad size {}x{}", width, height);
+  cv::Mat grey(height, width, CV_8U);
+  for (int x = 0; x < width; ++x)  // near (left) to far (right), as the thumbnails colour them
+    grey.col(x).setTo(uint8_t(std::lround(255.0 * (1.0 - double(x) / (width - 1)))));
+  cv::Mat colour;
+  cv::applyColorMap(grey, colour, cv::COLORMAP_TURBO);
+  std::vector<unsigned char> png;
+  if (!cv::imencode(".png", colour, png))
+    fail(ErrorCategory::internal, "depth_colour_bar_png: PNG encoding failed");
+  return png;
+}
+
 std::vector<unsigned char> depth_thumbnail_png(const cv::Mat& depth, double lo, double hi,
                                                int max_width) {
   CVD_CHECK(depth.type() == CV_32F, "depth_thumbnail_png: depth must be CV_32F");
@@ -188,11 +201,14 @@ static std::string depth_section(const nlohmann::json& depth) {
           num(m, "rmse"), num(m, "rmse_log"), num(m, "delta1"), num(m, "delta2"), num(m, "delta3"),
           num(m, "frames", "{:.0f}"));
   o += "</table>\n<p class=\"note\">Depth-space metrics are in the GT's unit (metres); "
-       "disparity-space ones in 1/unit. Means over frames.</p>\n";
+       "disparity-space ones in 1/unit. Means over frames. The plots show the aligned rows; "
+       "the unaligned (none) ones are in the table only.</p>\n";
   for (const char* space : {"depth", "disparity"}) {
     std::vector<PlotSeries> sorted, per_frame;
     for (auto& [align, spaces] : depth.items()) {
-      if (!spaces.contains(space)) continue;
+      // Unaligned errors are orders of magnitude apart from aligned ones: table only, so the
+      // plots show the aligned curves on their own scale.
+      if (!spaces.contains(space) || align == "none") continue;
       const auto& m = spaces[space];
       std::vector<double> e = doubles(m.value("sorted_abs_rel", nlohmann::json::array()));
       sorted.push_back({align, iota_like(e.size(), e.size() > 1 ? 100.0 / (e.size() - 1) : 0), e});
@@ -288,7 +304,18 @@ std::string render_eval_report(const nlohmann::json& m,
   if (m.contains("pose")) o += pose_section(m["pose"]);
   if (m.contains("consistency")) o += consistency_section(m["consistency"]);
   if (!thumbnails.empty()) {
-    o += "<h2>Depth</h2>\n<div class=\"row\">";
+    o += "<h2>Depth</h2>\n";
+    if (m.contains("thumbnail_depth_range") && m["thumbnail_depth_range"].size() == 2) {
+      // One colour range for every thumbnail (predictions scaled to the GT's), so one bar.
+      const auto& r = m["thumbnail_depth_range"];
+      o += fmt::format(
+          "<figure class=\"colourbar\"><div style=\"display:flex;align-items:center;gap:6px\">"
+          "<span>{:.3g}</span><img alt=\"depth colour bar\" width=\"256\" height=\"12\" "
+          "src=\"data:image/png;base64,{}\"><span>{:.3g}</span></div><figcaption>depth, near "
+          "to far (every thumbnail below)</figcaption></figure>\n",
+          r[0].get<double>(), base64_encode(depth_colour_bar_png(256, 12)), r[1].get<double>());
+    }
+    o += "<div class=\"row\">";
     for (auto& t : thumbnails)
       o += fmt::format(
           "<figure><img alt=\"{0}\" src=\"data:image/png;base64,{1}\">"

@@ -31,6 +31,9 @@ std::string svg_line_plot(const std::string& title, const std::string& x_label,
 
 std::string base64_encode(const std::vector<unsigned char>& bytes);
 
+// The colour scale of the thumbnails as a PNG, near (left) to far (right).
+std::vector<unsigned char> depth_colour_bar_png(int width, int height);
+
 // Colour-mapped (turbo) PNG of a CV_32F depth map; near = warm. Invalid pixels (<= 0 or
 // non-finite) are black. [lo, hi] is the depth range mapped (use one range per video).
 std::vector<unsigned char> depth_thumbnail_png(const cv::Mat& depth, double lo, double hi,

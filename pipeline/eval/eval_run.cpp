@@ -102,6 +102,7 @@ static void evaluate_depth(const EvalSequence& pred, const EvalSequence& gt,
                            ? 1.0
                            : depth["median_video"]["depth"]["scales"][0].get<double>();
   auto [lo, hi] = depth_range(gs);
+  out.metrics["thumbnail_depth_range"] = {lo, hi};
   for (size_t i : spread_indices(matches.size(), opt.thumbnails)) {
     const std::string& name = gt.frames[matches[i].gt].name;
     out.thumbnails.push_back({name + " GT", depth_thumbnail_png(gs[i], lo, hi)});
@@ -209,6 +210,7 @@ static void evaluate_consistency(const EvalSequence& pred, const std::optional<I
   out.metrics["consistency"] = c;
   if (!out.metrics.contains("depth") || out.metrics["depth"].empty()) {
     auto [lo, hi] = depth_range(depths);
+    out.metrics["thumbnail_depth_range"] = {lo, hi};
     for (size_t i : spread_indices(frames.size(), opt.thumbnails))
       out.thumbnails.push_back({frames[i]->name, depth_thumbnail_png(depths[i], lo, hi)});
   }

@@ -4,8 +4,8 @@
 
 #include <cstring>
 #include <fstream>
-#include <regex>
 #include <string>
+#include <vector>
 
 #include "engine/error.h"
 #include "pipeline/io/atomic_file.h"
@@ -69,19 +69,38 @@ NpyStackInfo read_npy_stack_info(const fs::path& file) {
          file.string());
   if (header.find("'fortran_order': False") == std::string::npos)
     fail(ErrorCategory::format, "{}: .npy array must be in C order", file.string());
-  std::smatch m;
-  static const std::regex shape(R"('shape':\s*\(\s*(\d+)\s*,\s*(\d+)\s*,\s*(\d+)\s*\))");
-  if (!std::regex_search(header, m, shape))
-    fail(ErrorCategory::format, "{}: .npy array must have shape (frames, height, width)",
-         file.string());
+  // 'shape': (N, H, W) — parsed by hand (three non-negative integers).
   NpyStackInfo info;
-  try {
-    info.frames = std::stoll(m[1]);
-    info.height = std::stoll(m[2]);
-    info.width = std::stoll(m[3]);
-  } catch (const std::exception&) {
-    fail(ErrorCategory::format, "{}: .npy shape out of range", file.string());
+  {
+    const size_t key = header.find("'shape':");
+    const size_t open = key == std::string::npos ? key : header.find('(', key);
+    const size_t close = open == std::string::npos ? open : header.find(')', open);
+    std::vector<int64_t> dims;
+    if (close != std::string::npos) {
+      int64_t v = -1;
+      for (size_t k = open + 1; k <= close; ++k) {
+        const char c = header[k];
+        if (c >= '0' && c <= '9') {
+          if (v > (int64_t(1) << 40)) v = int64_t(1) << 41;  // out of range either way
+          v = (v < 0 ? 0 : v * 10) + (c - '0');
+        } else if (c == ',' || c == ')') {
+          if (v >= 0) dims.push_back(v);
+          v = -1;
+        } else if (c != ' ') {
+          dims.clear();
+          break;
+        }
+      }
+    }
+    if (dims.size() != 3)
+      fail(ErrorCategory::format, "{}: .npy array must have shape (frames, height, width)",
+           file.string());
+    info.frames = dims[0];
+    info.height = dims[1];
+    info.width = dims[2];
   }
+  if (info.frames > (int64_t(1) << 31))
+    fail(ErrorCategory::format, "{}: .npy frame count {} out of range", file.string(), info.frames);
   if (info.height <= 0 || info.width <= 0 || info.height > 65536 || info.width > 65536)
     fail(ErrorCategory::format, "{}: .npy frame size {}x{} out of range", file.string(), info.width,
          info.height);

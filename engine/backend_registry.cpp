@@ -1,5 +1,6 @@
 #include "engine/backend_registry.h"
 
+#include <deque>
 #include <mutex>
 
 #include "engine/backend_info.h"
@@ -12,7 +13,7 @@ namespace {
 
 struct Registry {
   std::mutex mutex;
-  std::vector<BackendHooks> backends;
+  std::deque<BackendHooks> backends;  // push_back keeps references to the others valid
   KernelRegistry kernels;
 };
 
@@ -45,9 +46,6 @@ void register_backend(const BackendHooks& hooks) {
   std::lock_guard<std::mutex> lock(r.mutex);
   for (const BackendHooks& b : r.backends)
     if (b.name == hooks.name) return;
-  // reserve() up front keeps the pointers find_backend hands out valid (a handful of backends).
-  if (r.backends.capacity() == 0) r.backends.reserve(16);
-  CVD_CHECK(r.backends.size() < r.backends.capacity(), "too many backends registered");
   r.backends.push_back(hooks);
   hooks.register_kernels(r.kernels);
 }
@@ -55,7 +53,7 @@ void register_backend(const BackendHooks& hooks) {
 std::vector<BackendHooks> registered_backends() {
   Registry& r = registry();
   std::lock_guard<std::mutex> lock(r.mutex);
-  return r.backends;
+  return {r.backends.begin(), r.backends.end()};
 }
 
 const KernelRegistry& kernel_registry() { return registry().kernels; }

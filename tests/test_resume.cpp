@@ -214,6 +214,37 @@ TEST_F(TinyClip, ARerunWithOtherTrainingSettingsStartsOverAndMoreEpochsContinue)
   EXPECT_EQ(read_json(out / "run.json")["training"]["resumed_from_epoch"], 1);
 }
 
+TEST_F(TinyClip, RefinedCamerasContinueFromTheCheckpointToTheSameResult) {
+  // The refined cameras are part of the epoch checkpoint: one epoch, then a rerun with two,
+  // ends where an uninterrupted two-epoch run does (poses, focal and depth).
+  const std::string refine = " --refine-poses --refine-focal";
+  fs::path ref = work() / "refine_uninterrupted";
+  CommandResult r = run_cvd(run_args(ref, 2) + refine);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  fs::path out = work() / "refine_continued";
+  r = run_cvd(run_args(out, 1) + refine);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = run_cvd(run_args(out, 2) + refine);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  json a = read_json(ref / "run.json"), b = read_json(out / "run.json");
+  EXPECT_EQ(b["training"]["resumed_from_epoch"], 1);
+  ASSERT_TRUE(a.contains("camera_refinement")) << a.dump(2);
+  const json& ca = a["camera_refinement"];
+  const json& cb = b["camera_refinement"];
+  EXPECT_GT(ca["rotation_change_deg"]["max"].get<double>(), 0.0) << "the cameras moved";
+  EXPECT_NEAR(cb["focal_scale"].get<double>(), ca["focal_scale"].get<double>(), 1e-9);
+  EXPECT_NEAR(cb["rotation_change_deg"]["mean"].get<double>(),
+              ca["rotation_change_deg"]["mean"].get<double>(), 1e-6);
+  // The refined focal reaches intrinsics.json; poses.txt carries the refined poses.
+  json ka = read_json(ref / "intrinsics.json"), kb = read_json(out / "intrinsics.json");
+  EXPECT_NEAR(kb["fx"].get<double>(), ka["fx"].get<double>(), 1e-6 * ka["fx"].get<double>());
+  EXPECT_EQ(slurp(ref / "poses.txt"), slurp(out / "poses.txt"));
+  int files = 0;
+  double worst = max_relative_depth_difference(ref, out, files);
+  EXPECT_EQ(files, 6);
+  EXPECT_LE(worst, 1e-5) << "largest relative depth difference continued vs uninterrupted";
+}
+
 // Flow pairs finished in `out`: each pair's .json is written last (atomically).
 std::map<std::string, fs::file_time_type> finished_flow_pairs(const fs::path& out) {
   std::map<std::string, fs::file_time_type> done;

@@ -43,6 +43,9 @@ struct RunOptions {
   std::string matcher = "sequential";
   int colmap_long_side = 640;
   int colmap_max_features = 4096;
+  // "auto" (keyframes spaced by motion on long clips), "all" (every frame to the mapper) or a
+  // keyframe count; pipeline/poses/keyframe_selection.h.
+  std::string colmap_keyframes = "auto";
   std::filesystem::path masks;  // optional folder of masks (same names) passed to COLMAP
 
   // Flow
@@ -59,6 +62,10 @@ struct RunOptions {
   double lambda_disparity = -1;
   uint64_t seed = 1;
   int warmup_steps = 200;  // default network only: fit sparse SfM depth first
+  // Refine the camera rotations and centres (refine_poses) and the focal length (refine_focal)
+  // through the geometric loss while training (pipeline/training/camera_refinement.h).
+  bool refine_poses = false;
+  bool refine_focal = false;
   // Arithmetic of the CPU convolutions during the whole run: "f32" or "bf16" (AMX /
   // AVX512-BF16; engine/compute_precision.h). Weights, optimizer state and outputs stay f32.
   std::string precision = "f32";

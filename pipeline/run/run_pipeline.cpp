@@ -5,6 +5,7 @@
 #include <zlib.h>
 #include <algorithm>
 #include <chrono>
+#include <memory>
 #include <opencv2/imgproc.hpp>
 
 #include "engine/adam.h"
@@ -301,7 +302,9 @@ RunResult run_pipeline(const RunOptions& o) {
                        {"flow", o.flow},
                        {"precision", precision_name(precision)},
                        {"pairs", pairs.size()},
-                       {"cameras_crc32", cameras_crc32(cams)}}
+                       {"cameras_crc32", cameras_crc32(cams)},
+                       {"refine_poses", o.refine_poses},
+                       {"refine_focal", o.refine_focal}}
                       .dump();
   to.stop_after_epochs = o.stop_after_epochs;
   if (o.cancel) to.cancelled = [c = o.cancel] { return c->load(); };
@@ -313,6 +316,20 @@ RunResult run_pipeline(const RunOptions& o) {
   to.on_epoch = [&](int e, double l) {
     spdlog::info("training: epoch {}/{} mean loss {:.4f}", e, o.epochs, l);
   };
+  std::unique_ptr<CameraRefinement> refinement;
+  if (o.refine_poses || o.refine_focal) {
+    std::vector<Pose> start;
+    int fixed = -1;
+    for (int k = 0; k < n; ++k) {
+      start.push_back(cams[k].pose);
+      if (fixed < 0 && cams[k].registered) fixed = k;
+    }
+    CameraRefinementOptions co;
+    co.poses = o.refine_poses;
+    co.focal = o.refine_focal;
+    refinement = std::make_unique<CameraRefinement>(start, std::max(fixed, 0), co);
+    to.cameras = refinement.get();
+  }
   t = Clock::now();
   RunResult res;
   res.initial_loss = evaluate_geometric_loss(*net, load_frame, pairs, to.lambda_disparity);
@@ -320,7 +337,22 @@ RunResult run_pipeline(const RunOptions& o) {
   timings["training"] = since(t);
   if (o.stop_after_epochs >= 0 && static_cast<int>(tr.epoch_losses.size()) < o.epochs)
     fail(ErrorCategory::cancelled, "stopped after epoch {} (test hook)", tr.epoch_losses.size());
-  res.final_loss = evaluate_geometric_loss(*net, load_frame, pairs, to.lambda_disparity);
+  res.final_loss =
+      evaluate_geometric_loss(*net, load_frame, pairs, to.lambda_disparity, refinement.get());
+  json refinement_info;
+  if (refinement) {
+    // The outputs carry the refined cameras.
+    std::vector<Pose> refined = refinement->poses();
+    double fs = refinement->focal_scale_value();
+    for (int k = 0; k < n; ++k) {
+      cams[k].pose = refined[k];
+      cams[k].intrinsics.fx *= fs;
+      cams[k].intrinsics.fy *= fs;
+    }
+    refinement_info = refinement->summary();
+    spdlog::info("camera refinement: rotations changed by {:.3f} deg on average, focal x{:.4f}",
+                 refinement_info["rotation_change_deg"]["mean"].get<double>(), fs);
+  }
 
   // 8. Outputs (a failure while writing them, e.g. a full disk, removes the partial ones)
   t = Clock::now();
@@ -384,6 +416,7 @@ RunResult run_pipeline(const RunOptions& o) {
                      cams[0].intrinsics.cy}},
                    {"details", poses.info}};
   info["calibration"] = calib;
+  if (!refinement_info.is_null()) info["camera_refinement"] = refinement_info;
   {
     int64_t count = 0;
     for (auto& sp : sparse) count += static_cast<int64_t>(sp.z.size());

@@ -36,14 +36,23 @@ struct Projection {
   Tensor z;     // [H*W] depth in camera j
 };
 
-Projection project(const Tensor& depth_i, const PairDirection& d) {
+Projection project(const Tensor& depth_i, const PairDirection& d, const DirectionCameras* cams) {
   int64_t H = depth_i.size(0), W = depth_i.size(1);
   DType dt = depth_i.dtype();
   Tensor rays = pixel_rays(d.K_i, H, W, dt);
+  if (cams && cams->focal_scale.defined())  // K^-1 with fx, fy scaled: x and y rows divided
+    rays =
+        concat({mul(rays.narrow(0, 0, 2), reciprocal(cams->focal_scale)), rays.narrow(0, 2, 1)}, 0);
   Tensor c_i = mul(rays, depth_i.reshape({1, H * W}));
-  Eigen::Matrix3d A = d.pose_j.R.transpose() * d.pose_i.R;
-  Eigen::Vector3d b = d.pose_j.R.transpose() * (d.pose_i.t - d.pose_j.t);
-  Tensor c_ij = add(matmul(mat3(A, dt), c_i), vec3(b, dt));
+  Tensor c_ij;
+  if (cams) {
+    Tensor Rj_t = transpose(cams->R_j, 0, 1);
+    c_ij = add(matmul(matmul(Rj_t, cams->R_i), c_i), matmul(Rj_t, sub(cams->t_i, cams->t_j)));
+  } else {
+    Eigen::Matrix3d A = d.pose_j.R.transpose() * d.pose_i.R;
+    Eigen::Vector3d b = d.pose_j.R.transpose() * (d.pose_i.t - d.pose_j.t);
+    c_ij = add(matmul(mat3(A, dt), c_i), vec3(b, dt));
+  }
   Tensor X = c_ij.narrow(0, 0, 1).reshape({H * W});
   Tensor Y = c_ij.narrow(0, 1, 1).reshape({H * W});
   Tensor Z = c_ij.narrow(0, 2, 1).reshape({H * W});
@@ -53,7 +62,8 @@ Projection project(const Tensor& depth_i, const PairDirection& d) {
 }  // namespace
 
 GeometricLoss geometric_loss_direction(const Tensor& depth_i, const Tensor& depth_j,
-                                       const PairDirection& d, const GeometricLossOptions& o) {
+                                       const PairDirection& d, const GeometricLossOptions& o,
+                                       const DirectionCameras* cameras) {
   CVD_CHECK(depth_i.dim() == 2 && depth_j.dim() == 2 && depth_i.shape() == depth_j.shape(),
             "geometric loss: depth maps {} and {} must be [H, W] of one size", depth_i.str(),
             depth_j.str());
@@ -65,10 +75,15 @@ GeometricLoss geometric_loss_direction(const Tensor& depth_i, const Tensor& dept
   DType dt = depth_i.dtype();
   Tensor flow = d.flow.to(dt), mask = d.mask.to(dt).reshape({H * W});
 
-  Projection p = project(depth_i, d);
+  Projection p = project(depth_i, d, cameras);
   Tensor z = maximum(p.z, Tensor::full({}, o.min_depth, dt));
-  Tensor pu = add_scalar(mul_scalar(div(p.u, z), d.K_j.fx), d.K_j.cx);
-  Tensor pv = add_scalar(mul_scalar(div(p.v, z), d.K_j.fy), d.K_j.cy);
+  Tensor xn = div(p.u, z), yn = div(p.v, z);
+  if (cameras && cameras->focal_scale.defined()) {
+    xn = mul(xn, cameras->focal_scale);
+    yn = mul(yn, cameras->focal_scale);
+  }
+  Tensor pu = add_scalar(mul_scalar(xn, d.K_j.fx), d.K_j.cx);
+  Tensor pv = add_scalar(mul_scalar(yn, d.K_j.fy), d.K_j.cy);
 
   // Flow targets f_ij = x + F_ij(x) (constants).
   std::vector<double> fu(H * W), fv(H * W);
@@ -105,9 +120,11 @@ GeometricLoss geometric_loss_direction(const Tensor& depth_i, const Tensor& dept
 
 GeometricLoss geometric_loss_pair(const Tensor& depth_i, const Tensor& depth_j,
                                   const PairDirection& ij, const PairDirection& ji,
-                                  const GeometricLossOptions& o) {
-  GeometricLoss a = geometric_loss_direction(depth_i, depth_j, ij, o);
-  GeometricLoss b = geometric_loss_direction(depth_j, depth_i, ji, o);
+                                  const GeometricLossOptions& o, const PairCameras* cameras) {
+  GeometricLoss a =
+      geometric_loss_direction(depth_i, depth_j, ij, o, cameras ? &cameras->ij : nullptr);
+  GeometricLoss b =
+      geometric_loss_direction(depth_j, depth_i, ji, o, cameras ? &cameras->ji : nullptr);
   return {mul_scalar(add(a.spatial, b.spatial), 0.5),
           mul_scalar(add(a.disparity, b.disparity), 0.5), mul_scalar(add(a.total, b.total), 0.5)};
 }
@@ -116,7 +133,7 @@ Tensor reprojection_distance(const Tensor& depth_i, const PairDirection& d) {
   NoGradGuard ng;
   int64_t H = depth_i.size(0), W = depth_i.size(1);
   DType dt = depth_i.dtype();
-  Projection p = project(depth_i, d);
+  Projection p = project(depth_i, d, nullptr);
   Tensor z = maximum(p.z, Tensor::full({}, 1e-6, dt));
   std::vector<double> u = p.u.to_vector(), v = p.v.to_vector(), zz = z.to_vector();
   std::vector<double> fl = d.flow.to_vector(), out(H * W);

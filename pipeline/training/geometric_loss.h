@@ -24,6 +24,18 @@ struct PairDirection {
   Tensor mask;          // [H, W] 1 where the flow is trusted, else 0
 };
 
+// The cameras of one direction as tensors, for refining them through the loss (see
+// camera_refinement.h): rotations [3, 3] and camera centres [3, 1] replacing the pose constants
+// of the PairDirection, and a focal scale [] multiplying fx and fy of both intrinsics (undefined:
+// 1). Any of them may require grad.
+struct DirectionCameras {
+  Tensor R_i, t_i, R_j, t_j;
+  Tensor focal_scale;
+};
+struct PairCameras {
+  DirectionCameras ij, ji;
+};
+
 struct GeometricLossOptions {
   double lambda_disparity = 0.1;  // lambda: Mannequin 0.1, MiDaS 1e-4 (docs/design.md 5.7)
   double min_depth = 1e-3;        // z below this is clamped before inversion
@@ -35,14 +47,17 @@ struct GeometricLoss {
   Tensor total;      // spatial + lambda * disparity
 };
 
-// One direction: depth_i and depth_j are [H, W] (may require grad).
+// One direction: depth_i and depth_j are [H, W] (may require grad). With `cameras`, their
+// tensors replace the poses of `d` and scale its focal lengths.
 GeometricLoss geometric_loss_direction(const Tensor& depth_i, const Tensor& depth_j,
-                                       const PairDirection& d, const GeometricLossOptions& o);
+                                       const PairDirection& d, const GeometricLossOptions& o,
+                                       const DirectionCameras* cameras = nullptr);
 
 // Both directions of a pair, averaged. `ji` must be the reverse direction of `ij`.
 GeometricLoss geometric_loss_pair(const Tensor& depth_i, const Tensor& depth_j,
                                   const PairDirection& ij, const PairDirection& ji,
-                                  const GeometricLossOptions& o);
+                                  const GeometricLossOptions& o,
+                                  const PairCameras* cameras = nullptr);
 
 // Per-pixel reprojection distance ||p_ij - f_ij|| (no gradient), [H, W]; used by evaluation
 // to measure the flow-reprojection consistency of a depth result.

@@ -28,6 +28,7 @@ struct Checkpoint {
   std::vector<double> losses;
   int skipped = 0;
   std::string key;
+  nlohmann::json cameras;  // CameraRefinement::state(), null when cameras are not refined
 };
 
 fs::path weights_path(const fs::path& dir, int epoch) {
@@ -47,6 +48,7 @@ void save_checkpoint(const fs::path& dir, DepthNet& net, const Adam& adam, const
                       {"epoch_losses", c.losses},
                       {"skipped_steps", c.skipped},
                       {"key", c.key}};
+  if (!c.cameras.is_null()) j["cameras"] = c.cameras;
   write_text_file(dir / "checkpoint.json", j.dump(2));
   for (int e = 0; e < c.epoch; ++e) {
     std::error_code ec;
@@ -66,12 +68,13 @@ bool load_checkpoint(const fs::path& dir, DepthNet& net, Adam& adam, Checkpoint&
     c.rng_state = j.at("rng_state").get<std::string>();
     c.losses = j.at("epoch_losses").get<std::vector<double>>();
     c.skipped = j.at("skipped_steps").get<int>();
+    if (j.contains("cameras")) c.cameras = j.at("cameras");
     const std::string stored = j.value("key", std::string());
     if (stored != c.key) {
       spdlog::warn(
           "training: the checkpoint in {} was made with other settings; training starts over",
           dir.string());
-      c = Checkpoint{0, {}, {}, 0, c.key};
+      c = Checkpoint{0, {}, {}, 0, c.key, nullptr};
       return false;
     }
   } catch (const nlohmann::json::exception& e) {
@@ -102,14 +105,38 @@ std::map<int, Tensor> batch_depths(DepthNet& net, const std::function<Tensor(int
   return r;
 }
 
+Tensor pair_loss(const Tensor& depth_i, const Tensor& depth_j, const TrainingPair& p,
+                 const GeometricLossOptions& lo, const CameraRefinement* cameras) {
+  if (!cameras) return geometric_loss_pair(depth_i, depth_j, p.ij, p.ji, lo).total;
+  PairCameras pc = cameras->pair(p.i, p.j);
+  return geometric_loss_pair(depth_i, depth_j, p.ij, p.ji, lo, &pc).total;
+}
+
 Tensor batch_loss(const std::map<int, Tensor>& depths,
-                  const std::vector<const TrainingPair*>& batch, const GeometricLossOptions& lo) {
+                  const std::vector<const TrainingPair*>& batch, const GeometricLossOptions& lo,
+                  const CameraRefinement* cameras) {
   Tensor total;
   for (auto* p : batch) {
-    Tensor l = geometric_loss_pair(depths.at(p->i), depths.at(p->j), p->ij, p->ji, lo).total;
+    Tensor l = pair_loss(depths.at(p->i), depths.at(p->j), *p, lo, cameras);
     total = total.defined() ? add(total, l) : l;
   }
-  return mul_scalar(total, 1.0 / static_cast<double>(batch.size()));
+  total = mul_scalar(total, 1.0 / static_cast<double>(batch.size()));
+  return cameras ? add(total, cameras->prior()) : total;
+}
+
+// The cameras' parameter groups, each with its own step size.
+void add_camera_groups(Adam& adam, const CameraRefinement& cameras, const AdamOptions& base) {
+  const CameraRefinementOptions& co = cameras.options();
+  std::pair<std::vector<Tensor>, double> groups[] = {
+      {cameras.rotation_parameters(), co.lr_rotation},
+      {cameras.translation_parameters(), co.lr_translation},
+      {cameras.focal_parameters(), co.lr_focal}};
+  for (auto& [params, lr] : groups) {
+    if (params.empty()) continue;
+    AdamOptions ao = base;
+    ao.lr = lr;
+    adam.add_param_group(params, ao);
+  }
 }
 
 // Fault injection for the reliability tests: CVD_FAULT_NAN_LOSS_STEPS="1,3" treats the loss of
@@ -162,11 +189,18 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
   ao.beta1 = 0.9;
   ao.beta2 = 0.999;
   Adam adam(net.parameters(), ao);
+  if (o.cameras) add_camera_groups(adam, *o.cameras, ao);
   Generator rng(o.seed);
   TrainingResult result;
   Checkpoint ck;
   ck.key = o.resume_key;
   if (load_checkpoint(o.checkpoint_dir, net, adam, ck)) {
+    if (o.cameras) {
+      if (ck.cameras.is_null())
+        fail(ErrorCategory::format, "{}: the checkpoint has no refined cameras; delete it",
+             o.checkpoint_dir.string());
+      o.cameras->load_state(ck.cameras);
+    }
     rng.set_state(ck.rng_state);
     result.epoch_losses = ck.losses;
     result.skipped_steps = ck.skipped;
@@ -192,7 +226,7 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
            ++k)
         batch.push_back(&pairs[order[k]]);
       adam.zero_grad();
-      Tensor loss = batch_loss(batch_depths(net, load_frame, batch), batch, lo);
+      Tensor loss = batch_loss(batch_depths(net, load_frame, batch), batch, lo, o.cameras);
       double v = loss.item();
       if (nan_fault.hits(epoch * steps_per_epoch + s + 1))
         v = std::numeric_limits<double>::quiet_NaN();
@@ -213,6 +247,7 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
            "training diverged: every step of epoch {} had a non-finite loss ({} steps skipped in "
            "all); try a lower --lr, or check the poses and flow",
            epoch + 1, result.skipped_steps);
+    if (o.cameras) o.cameras->relinearize();
     double mean_loss = sum / counted;
     result.epoch_losses.push_back(mean_loss);
     if (o.on_epoch) o.on_epoch(epoch + 1, mean_loss);
@@ -221,6 +256,7 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
       ck.rng_state = rng.state();
       ck.losses = result.epoch_losses;
       ck.skipped = result.skipped_steps;
+      if (o.cameras) ck.cameras = o.cameras->state();
       save_checkpoint(o.checkpoint_dir, net, adam, ck);
     }
     if (o.stop_after_epochs >= 0 && epoch + 1 >= o.stop_after_epochs) break;
@@ -229,7 +265,8 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
 }
 
 double evaluate_geometric_loss(DepthNet& net, const std::function<Tensor(int)>& load_frame,
-                               const std::vector<TrainingPair>& pairs, double lambda_disparity) {
+                               const std::vector<TrainingPair>& pairs, double lambda_disparity,
+                               const CameraRefinement* cameras) {
   NoGradGuard ng;
   bool was_training = net.is_training();
   net.eval();
@@ -240,7 +277,7 @@ double evaluate_geometric_loss(DepthNet& net, const std::function<Tensor(int)>& 
   for (const auto& p : pairs) {
     for (int f : {p.i, p.j})
       if (!cache.count(f)) cache[f] = net.depth(load_frame(f).unsqueeze(0)).squeeze(0).squeeze(0);
-    sum += geometric_loss_pair(cache[p.i], cache[p.j], p.ij, p.ji, lo).total.item();
+    sum += pair_loss(cache[p.i], cache[p.j], p, lo, cameras).item();
   }
   net.train(was_training);
   return pairs.empty() ? 0.0 : sum / static_cast<double>(pairs.size());

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "models/depth_net.h"
+#include "pipeline/training/camera_refinement.h"
 #include "pipeline/training/geometric_loss.h"
 
 namespace cvd {
@@ -36,6 +37,9 @@ struct TrainingOptions {
   std::function<void(int, double)> on_epoch;
   // Polled between steps; returning true stops with Error(cancelled).
   std::function<bool()> cancelled;
+  // Cameras refined with the network (null: the pairs' poses are constants). Its frame indices
+  // are the pairs' frame indices; it is relinearised after every epoch and checkpointed with it.
+  CameraRefinement* cameras = nullptr;
   // Test hook: stop (as if killed) after this many completed epochs; <0 = never.
   int stop_after_epochs = -1;
 };
@@ -53,7 +57,9 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
                                const TrainingOptions& options);
 
 // Mean geometric loss over all pairs with the network as it is (eval mode, no gradients).
+// With `cameras`, the loss of the refined cameras.
 double evaluate_geometric_loss(DepthNet& net, const std::function<Tensor(int)>& load_frame,
-                               const std::vector<TrainingPair>& pairs, double lambda_disparity);
+                               const std::vector<TrainingPair>& pairs, double lambda_disparity,
+                               const CameraRefinement* cameras = nullptr);
 
 }  // namespace cvd

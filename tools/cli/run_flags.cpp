@@ -37,6 +37,19 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s) {
   c->add_option("--matcher", o.matcher, "COLMAP matcher")
       ->check(CLI::IsMember({"sequential", "exhaustive"}));
   c->add_option("--colmap-size", o.colmap_long_side, "Long side of the frames COLMAP sees");
+  c->add_option("--colmap-keyframes", o.colmap_keyframes,
+                "Frames COLMAP's mapper reconstructs: auto (keyframes spaced by image motion on "
+                "long clips, the other frames registered to them), all, or a keyframe count")
+      ->check([](const std::string& v) {
+        if (v == "auto" || v == "all") return std::string();
+        try {
+          size_t used = 0;
+          int k = std::stoi(v, &used);
+          if (used == v.size() && k >= 2) return std::string();
+        } catch (...) {
+        }
+        return "must be auto, all or a keyframe count of at least 2, got '" + v + "'";
+      });
   c->add_option("--colmap-features", o.colmap_max_features,
                 "Max SIFT features per frame for COLMAP");
   c->add_option("--masks", o.masks,
@@ -64,6 +77,11 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s) {
                 "Weight of the disparity term; < 0: per architecture (" + lambda_defaults + ")");
   c->add_option("--seed", o.seed, "Random seed");
   c->add_option("--warmup", o.warmup_steps, "Sparse-depth warm-up steps of the default network");
+  c->add_flag("--refine-poses", o.refine_poses,
+              "Refine the camera rotations and centres with the depth (through the geometric "
+              "loss; the first camera stays fixed); outputs carry the refined poses");
+  c->add_flag("--refine-focal", o.refine_focal,
+              "Refine the focal length with the depth (one scale for the video)");
   c->add_option("--precision", o.precision,
                 "Convolution arithmetic: f32, or bf16 on AMX / AVX512-BF16 (f32 weights)")
       ->check(CLI::IsMember({"f32", "bf16"}));

@@ -11,7 +11,10 @@
 # environment (defaults sized for a 2-core machine, ~30 min in all):
 #   FRAMES=40 FRAME_STEP=1 DEPTH_SIZE=192 WIDTH=0.125 EPOCHS=4 WARMUP=60
 #   MODEL=weights.cvdw ARCH=mannequin|midas_small|midas_v2 (converted pretrained weights, optional)
-#   POSES="gt colmap" (which runs)
+#   POSES="gt colmap" (which runs; suffixes: "+all" gives COLMAP's mapper every frame
+#   (--colmap-keyframes all) instead of keyframes; "+refine", e.g. colmap+refine, adds
+#   --refine-poses and reuses the cache of the run without it, so both start from the same poses
+#   and flow)
 # Needs jq; colmap on PATH for the COLMAP run (skipped with a note when absent).
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
@@ -37,8 +40,19 @@ rows=()
 for poses in $POSES; do
   run="$out/$poses"
   extra=()
-  if [[ $poses == gt ]]; then
-    extra=(--poses "$data/groundtruth_rgb.txt" --poses-format tum)
+  base="${poses%+refine}"
+  if [[ $base == *+all ]]; then
+    extra+=(--colmap-keyframes all)
+  fi
+  if [[ $base != "$poses" ]]; then
+    extra+=(--refine-poses)
+    if [[ -d "$out/$base/cache" ]]; then
+      rm -rf "$run" && mkdir -p "$run" && cp -r "$out/$base/cache" "$run/cache"
+      rm -rf "$run/cache/training"
+    fi
+  fi
+  if [[ ${base%+all} == gt ]]; then
+    extra+=(--poses "$data/groundtruth_rgb.txt" --poses-format tum)
   elif ! command -v colmap >/dev/null; then
     echo "eval_7scenes: colmap not on PATH, COLMAP run skipped" >&2
     continue
@@ -52,8 +66,11 @@ for poses in $POSES; do
     >>"$out/$poses.log" 2>&1
   final="$run/eval/metrics.json" initial="$run/eval_initial/metrics.json"
   ate=$(jq -r 'if .pose then (.pose.ate_rmse * 100 | . * 10 | round / 10 | tostring) else "-" end' "$final")
+  # Rotation error between frames (RPE, mean degrees) at the smallest and largest frame step.
+  rpe=$(jq -r 'if .pose and (.pose.rpe | length) > 0 then ([.pose.rpe[0], .pose.rpe[-1]] |
+    map("\(.rot_mean_deg * 1000 | round / 1000) deg @\(.delta)") | join(", ")) else "-" end' "$final")
   registered=$(jq -r '.frame_stats.registered' "$run/run.json")
-  label="$poses ($registered/$FRAMES frames, ATE ${ate} cm, ${secs} s)"
+  label="$poses ($registered/$FRAMES frames, ATE ${ate} cm, RPE rot ${rpe}, ${secs} s)"
   row() {  # label, what, metrics file
     jq -r --arg l "$1" --arg w "$2" '[$l, $w,
       (.depth.median_frame.depth.abs_rel | . * 1000 | round / 1000 | tostring),

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <fstream>
@@ -225,6 +226,51 @@ TEST(ColmapRunner, RegistersTwentyKitchenFramesByNameWithTrueIntrinsics) {
   RecordProperty("sim3_scale", std::to_string(sim3_scale));
   RecordProperty("calibrated_scale", std::to_string(cal.scale));
   EXPECT_LT(rigid_ate, 0.04) << "calibrated trajectory vs GT after a rigid alignment, metres";
+}
+
+TEST(ColmapRunner, KeyframesAreMappedAndTheOtherFramesRegisteredToThem) {
+  CVD_REQUIRE_COLMAP();
+  CVD_REQUIRE_SHARED_DATA(data, "7scenes_redkitchen_f000000-000149");
+  // The frames of the test above at a smaller size and budget; 8 keyframes for the mapper, the
+  // other 12 registered afterwards (image_registrator) and one bundle adjustment.
+  constexpr int kFrames = 20, kStride = 6;
+  std::vector<fs::path> files;
+  for (int i = 0; i < kFrames; ++i)
+    files.push_back(data / "rgb" / fmt::format("frame-{:06d}.color.jpg", i * kStride));
+  std::vector<ColmapFrame> frames = load_colmap_frames(files);
+  test::TempDir dir;
+  ColmapOptions opt;
+  opt.intrinsics = Intrinsics{525.0, 525.0, 320.0, 240.0, 640, 480};
+  opt.max_image_size = 384;
+  opt.max_num_features = 1024;
+  opt.sequential_overlap = 3;
+  opt.keyframes = parse_keyframe_mode("8", "test");
+  ColmapResult r = run_colmap(frames, dir / "work", opt);
+  ASSERT_EQ(r.keyframes.size(), 8u);
+  EXPECT_EQ(r.keyframes.front(), frames.front().name);
+  EXPECT_EQ(r.keyframes.back(), frames.back().name);
+  EXPECT_GT(r.matched_pairs, 0);
+  std::vector<std::string> steps;
+  for (const auto& [step, s] : r.step_seconds) steps.push_back(step);
+  for (const char* want : {"matches_importer", "mapper", "image_registrator", "bundle_adjuster"})
+    EXPECT_NE(std::find(steps.begin(), steps.end(), want), steps.end()) << want;
+  // Every frame has a pose, keyframe or not, and they agree with the ground truth.
+  EXPECT_TRUE(r.unregistered.empty()) << r.unregistered.size() << " frames unregistered";
+  auto gt = read_tum_trajectory(data / "groundtruth_rgb.txt");
+  Eigen::Matrix3Xd est(3, kFrames), ref(3, kFrames);
+  double worst_rotation_deg = 0;
+  for (int i = 0; i < kFrames; ++i) {
+    ASSERT_TRUE(r.cameras[i].registered) << frames[i].name;
+    est.col(i) = r.cameras[i].pose.t;
+    ref.col(i) = gt[i * kStride].pose.t;
+    Eigen::Matrix3d est_rel = r.cameras[0].pose.R.transpose() * r.cameras[i].pose.R;
+    Eigen::Matrix3d gt_rel = gt[0].pose.R.transpose() * gt[i * kStride].pose.R;
+    worst_rotation_deg = std::max(
+        worst_rotation_deg, Eigen::AngleAxisd(est_rel * gt_rel.transpose()).angle() * 180.0 / M_PI);
+  }
+  // Same tolerances as with every frame mapped (above): 5 degrees, 2 cm ATE.
+  EXPECT_LT(worst_rotation_deg, 5.0);
+  EXPECT_LT(aligned_rmse(est, ref, true), 0.02) << "ATE after Sim(3) alignment, metres";
 }
 
 // `cvd run` reuses its cached COLMAP model only when it was made from the same frames and

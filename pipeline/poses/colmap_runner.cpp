@@ -16,6 +16,7 @@
 
 #include "engine/error.h"
 #include "pipeline/poses/colmap_command.h"
+#include "pipeline/poses/colmap_keyframe_registration.h"
 #include "pipeline/poses/intrinsics_colmap_database.h"
 
 namespace cvd {
@@ -331,7 +332,8 @@ void match_features(const fs::path& exe, const fs::path& work_dir, const ColmapO
 // 4. Mapper, with one relaxed retry (and the focal search when the focal is unknown).
 MapperAttempt run_mapper(const fs::path& exe, const fs::path& work_dir,
                          const ColmapOptions& options, size_t n, int width,
-                         const ColmapImages& images, int required, ColmapResult& result) {
+                         const ColmapImages& images, int required,
+                         const std::vector<std::string>& extra_args, ColmapResult& result) {
   const int cw = images.cw;
   const std::string threads = std::to_string(options.num_threads);
   const std::string db = (work_dir / "colmap.db").string();
@@ -353,6 +355,7 @@ MapperAttempt run_mapper(const fs::path& exe, const fs::path& work_dir,
                {"--Mapper.init_min_num_inliers", "50", "--Mapper.init_max_forward_motion", "0.99",
                 "--Mapper.abs_pose_min_num_inliers", "15", "--Mapper.abs_pose_min_inlier_ratio",
                 "0.15", "--Mapper.min_num_matches", "10", "--Mapper.init_max_error", "6"});
+    a.insert(a.end(), extra_args.begin(), extra_args.end());
     return a;
   };
   // Candidate focals at COLMAP's resolution. Without libsqlite3 the database cannot be edited,
@@ -523,6 +526,25 @@ void finish_result(const std::vector<ColmapFrame>& frames, const FrameSet& set,
   }
 }
 
+// Keyframes from the frames' motion (every frame when keyframing would not pay).
+KeyframeSelection choose_keyframes(const std::vector<ColmapFrame>& frames,
+                                   const ColmapOptions& options, ColmapResult& result) {
+  const auto t0 = Clock::now();
+  KeyframeSelection keys;
+  if (options.keyframes.mode == KeyframeMode::all) {
+    keys = select_keyframes(std::vector<double>(frames.size(), 0.0), options.keyframes);
+  } else {
+    std::vector<cv::Mat> images;
+    for (const auto& f : frames) images.push_back(f.image);
+    keys = select_keyframes(consecutive_motion(images, options.keyframes.flow_long_side),
+                            options.keyframes);
+  }
+  result.keyframe_reason = keys.reason;
+  result.keyframe_seconds = seconds_since(t0);
+  spdlog::info("colmap: mapping {}", keys.reason);
+  return keys;
+}
+
 }  // namespace
 
 std::filesystem::path find_executable(const std::string& program) {
@@ -587,12 +609,49 @@ ColmapResult run_colmap(const std::vector<ColmapFrame>& frames,
 
   const ColmapImages images = write_colmap_images(frames, set, work_dir, options);
   extract_features(exe, work_dir, options, images, set.any_mask, result);
-  match_features(exe, work_dir, options, result);
-  const int required =
-      std::min<int>(int(n), std::max<int>(options.min_registered_frames,
-                                          int(std::ceil(options.min_registered_fraction * n))));
-  const MapperAttempt best =
-      run_mapper(exe, work_dir, options, n, set.width, images, required, result);
+  auto required_of = [&](size_t count) {
+    return std::min<int>(int(count),
+                         std::max<int>(options.min_registered_frames,
+                                       int(std::ceil(options.min_registered_fraction * count))));
+  };
+  const int required = required_of(n);
+  std::vector<std::string> internal(n);
+  for (size_t k = 0; k < n; ++k) internal[k] = internal_name(k);
+  const KeyframeSelection keys = choose_keyframes(frames, options, result);
+  std::vector<std::string> mapper_extra;
+  if (!keys.all_frames) {
+    for (int k : keys.keyframes) result.keyframes.push_back(frames[size_t(k)].name);
+    mapper_extra = {"--image_list_path",
+                    colmap::write_image_list(work_dir, internal, keys.keyframes).string()};
+  }
+  if (!keys.all_frames && options.matcher == ColmapMatcher::sequential) {
+    auto pairs =
+        keyframe_match_pairs(int(n), keys.keyframes, options.sequential_overlap, options.keyframes);
+    result.matched_pairs = int(pairs.size());
+    colmap::match_pairs(exe, work_dir, options, internal, pairs, result);
+  } else {
+    match_features(exe, work_dir, options, result);
+  }
+  const size_t mapped = keys.all_frames ? n : keys.keyframes.size();
+  MapperAttempt best = run_mapper(exe, work_dir, options, mapped, set.width, images,
+                                  required_of(mapped), mapper_extra, result);
+  if (!keys.all_frames && !best.model.images.empty()) {
+    colmap::RegisteredModel reg = colmap::register_remaining_frames(
+        exe, work_dir, best.model_dir, options, result.focal_method == "colmap", result);
+    if (reg.ok) {
+      spdlog::info("colmap: {} keyframes mapped, {} of {} frames after registering the others",
+                   best.model.images.size(), reg.model.images.size(), n);
+      best.model = std::move(reg.model);
+      best.model_dir = reg.model_dir;
+    } else {
+      std::string w = fmt::format(
+          "registering the frames between the keyframes failed ({}); only the {} mapped keyframes "
+          "have poses",
+          reg.failure, best.model.images.size());
+      spdlog::warn("colmap: {}", w);
+      result.warnings.push_back(w);
+    }
+  }
   finish_result(frames, set, images, best, required, work_dir, options, result);
   result.seconds = seconds_since(t_start);
   spdlog::info("colmap: registered {} of {} frames in {:.1f} s", result.model.images.size(), n,

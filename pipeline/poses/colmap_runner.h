@@ -19,7 +19,10 @@
 //      runs once per candidate field of view with the focal held fixed (the database's camera is
 //      edited in between; features and matches are reused), the best run is chosen, then
 //      bundle_adjuster refines the focal on that model (principal point fixed at the centre);
-//   5. model_converter to TXT for every model; the model with most registered frames is used.
+//   5. model_converter to TXT for every model; the model with most registered frames is used;
+//   6. with keyframes (ColmapOptions::keyframes, on long clips): steps 3-4 match a chosen pair
+//      list (matches_importer) and map the keyframes only (--image_list_path); then every other
+//      frame is registered to the model (image_registrator) and bundle_adjuster refines all.
 // Results are in the resolution of the frames given (intrinsics and 2-D observations are scaled
 // back from the downscaled copies).
 #pragma once
@@ -33,6 +36,7 @@
 #include "pipeline/geometry/camera.h"
 #include "pipeline/io/trajectory_io.h"
 #include "pipeline/poses/intrinsics_focal_search.h"
+#include "pipeline/poses/keyframe_selection.h"
 
 namespace cvd {
 
@@ -76,6 +80,11 @@ struct ColmapOptions {
   // than `max_refine_change` (relative) away from the searched one is rejected with a warning.
   bool refine_focal = true;
   double max_refine_change = 0.25;
+  // Keyframes (pipeline/poses/keyframe_selection.h): unless every frame is used, the mapper
+  // reconstructs the keyframes only, the other frames are registered to that model
+  // (image_registrator) and one bundle_adjuster run refines all; with the sequential matcher the
+  // matched pairs are keyframe_match_pairs(..., sequential_overlap, keyframes).
+  KeyframeOptions keyframes;
 };
 
 struct ColmapResult {
@@ -97,6 +106,11 @@ struct ColmapResult {
   std::filesystem::path log_file;  // COLMAP's captured output
   // Wall time of each COLMAP command, in order, e.g. {"feature_extractor", 8.1}.
   std::vector<std::pair<std::string, double>> step_seconds;
+  // Keyframes: the names the mapper reconstructed (empty: every frame) and why.
+  std::vector<std::string> keyframes;
+  std::string keyframe_reason;
+  double keyframe_seconds = 0;  // measuring the motion and choosing
+  int matched_pairs = 0;        // image pairs matched (0: COLMAP's own matcher chose them)
 };
 
 // Throws Error(unsupported) when the colmap binary is not found, Error(invalid_argument) for bad

@@ -268,11 +268,13 @@ PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::
     co.max_image_size = o.colmap_long_side;
     co.max_num_features = o.colmap_max_features;
     co.intrinsics = K;
+    co.keyframes = parse_keyframe_mode(o.colmap_keyframes, "--colmap-keyframes");
     fs::path model_dir = dir / "result_model";
     // What the cached model was made from: other settings, masks or frames mean another run.
     json key = {{"matcher", o.matcher},
                 {"long_side", o.colmap_long_side},
                 {"max_features", o.colmap_max_features},
+                {"keyframes", o.colmap_keyframes},
                 {"masks", o.masks.string()},
                 {"intrinsics", K ? json{K->fx, K->fy, K->cx, K->cy, K->width, K->height} : json()},
                 {"frames", f.names}};
@@ -309,11 +311,20 @@ PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::
         spdlog::warn("poses: COLMAP did not register {} frame(s): {}", r.unregistered.size(),
                      fmt::format("{}", fmt::join(r.unregistered, ", ")));
       model = r.model;
-      st.info = {{"colmap_models", r.num_models},
-                 {"colmap_attempts", r.attempts},
-                 {"colmap_seconds", r.seconds},
-                 {"unregistered", r.unregistered},
-                 {"warnings", r.warnings}};
+      st.info = {
+          {"colmap_models", r.num_models},
+          {"colmap_attempts", r.attempts},
+          {"colmap_seconds", r.seconds},
+          {"unregistered", r.unregistered},
+          {"warnings", r.warnings},
+          {"keyframes",
+           {{"setting", o.colmap_keyframes},
+            {"selection", r.keyframe_reason},
+            {"mapped", r.keyframes.empty() ? json(f.names.size()) : json(r.keyframes.size())},
+            {"names", r.keyframes},
+            {"matched_pairs", r.matched_pairs},
+            {"selection_seconds", r.keyframe_seconds}}},
+          {"step_seconds", r.step_seconds}};
       if (!K) {
         json cands = json::array();
         for (const auto& c : r.focal_candidates)

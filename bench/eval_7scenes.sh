@@ -12,7 +12,8 @@
 #   FRAMES=40 FRAME_STEP=1 DEPTH_SIZE=192 WIDTH=0.125 EPOCHS=4 WARMUP=60
 #   MODEL=weights.cvdw ARCH=mannequin|midas_small|midas_v2 (converted pretrained weights, optional)
 #   POSES="gt colmap" (which runs; suffixes: "+all" gives COLMAP's mapper every frame
-#   (--colmap-keyframes all) instead of keyframes; "+refine", e.g. colmap+refine, adds
+#   (--colmap-keyframes all) instead of keyframes; "+colmappts" (gt only) triangulates the sparse
+#   points with COLMAP on the given poses (--sparse-points colmap); "+refine", last, adds
 #   --refine-poses and reuses the cache of the run without it, so both start from the same poses
 #   and flow)
 # Needs jq; colmap on PATH for the COLMAP run (skipped with a note when absent).
@@ -44,6 +45,9 @@ for poses in $POSES; do
   if [[ $base == *+all ]]; then
     extra+=(--colmap-keyframes all)
   fi
+  if [[ $base == *+colmappts ]]; then
+    extra+=(--sparse-points colmap)
+  fi
   if [[ $base != "$poses" ]]; then
     extra+=(--refine-poses)
     if [[ -d "$out/$base/cache" ]]; then
@@ -51,7 +55,7 @@ for poses in $POSES; do
       rm -rf "$run/cache/training"
     fi
   fi
-  if [[ ${base%+all} == gt ]]; then
+  if [[ ${base%%+*} == gt ]]; then
     extra+=(--poses "$data/groundtruth_rgb.txt" --poses-format tum)
   elif ! command -v colmap >/dev/null; then
     echo "eval_7scenes: colmap not on PATH, COLMAP run skipped" >&2

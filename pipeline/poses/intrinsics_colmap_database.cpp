@@ -31,7 +31,7 @@ struct Sqlite {
   int (*busy_timeout)(Db*, int) = nullptr;
   bool loaded = false;
 
-  static constexpr int kOk = 0, kRow = 100, kDone = 101, kOpenReadWrite = 2;
+  static constexpr int kOk = 0, kRow = 100, kDone = 101, kOpenReadOnly = 1, kOpenReadWrite = 2;
 };
 
 const Sqlite& sqlite() {
@@ -153,6 +153,44 @@ int set_colmap_database_focal(const std::filesystem::path& database, double foca
     ++changed;
   }
   return changed;
+}
+
+std::map<std::string, int> colmap_database_image_ids(const std::filesystem::path& database) {
+  const Sqlite& s = sqlite();
+  if (!s.loaded)
+    fail(ErrorCategory::unsupported,
+         "cannot read {}: libsqlite3.so.0 (a dependency of COLMAP) could not be loaded",
+         database.string());
+  Sqlite::Db* db = nullptr;
+  if (s.open_v2(database.c_str(), &db, Sqlite::kOpenReadOnly, nullptr) != Sqlite::kOk) {
+    std::string msg = db ? s.errmsg(db) : "out of memory";
+    if (db) s.close(db);
+    fail(ErrorCategory::io, "cannot open COLMAP database {}: {}", database.string(), msg);
+  }
+  s.busy_timeout(db, 10000);
+  struct Closer {
+    const Sqlite& s;
+    Sqlite::Db* db;
+    ~Closer() { s.close(db); }
+  } closer{s, db};
+  std::map<std::string, int> ids;
+  Sqlite::Stmt* st = nullptr;
+  if (s.prepare_v2(db, "SELECT image_id, name FROM images", -1, &st, nullptr) != Sqlite::kOk)
+    fail(ErrorCategory::io, "COLMAP database {}: reading table images failed: {}",
+         database.string(), s.errmsg(db));
+  int rc = 0;
+  while ((rc = s.step(st)) == Sqlite::kRow) {
+    const void* text = s.column_blob(st, 1);
+    int bytes = s.column_bytes(st, 1);
+    if (text && bytes > 0)
+      ids[std::string(static_cast<const char*>(text), size_t(bytes))] =
+          static_cast<int>(s.column_int64(st, 0));
+  }
+  s.finalize(st);
+  if (rc != Sqlite::kDone)
+    fail(ErrorCategory::io, "COLMAP database {}: reading table images failed: {}",
+         database.string(), s.errmsg(db));
+  return ids;
 }
 
 }  // namespace cvd

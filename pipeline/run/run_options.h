@@ -46,6 +46,10 @@ struct RunOptions {
   // "auto" (keyframes spaced by motion on long clips), "all" (every frame to the mapper) or a
   // keyframe count; pipeline/poses/keyframe_selection.h.
   std::string colmap_keyframes = "auto";
+  // Sparse points when the poses are given: "flow" (flow tracks), "colmap" (COLMAP's
+  // point_triangulator on the given poses; required) or "auto" (colmap when it is on PATH, else
+  // flow tracks).
+  std::string sparse_points = "flow";
   std::filesystem::path masks;  // optional folder of masks (same names) passed to COLMAP
 
   // Flow

@@ -303,6 +303,7 @@ RunResult run_pipeline(const RunOptions& o) {
                        {"precision", precision_name(precision)},
                        {"pairs", pairs.size()},
                        {"cameras_crc32", cameras_crc32(cams)},
+                       {"sparse_points", o.sparse_points},
                        {"refine_poses", o.refine_poses},
                        {"refine_focal", o.refine_focal}}
                       .dump();

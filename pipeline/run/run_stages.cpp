@@ -23,6 +23,7 @@
 #include "pipeline/poses/container_focal.h"
 #include "pipeline/poses/exif_focal.h"
 #include "pipeline/poses/intrinsics_focal_search.h"
+#include "pipeline/run/known_pose_points.h"
 
 namespace cvd {
 
@@ -229,6 +230,33 @@ std::vector<FrameCamera> cameras_from_file(const RunOptions& o, const FramesStag
 
 }  // namespace
 
+std::vector<ColmapFrame> colmap_frames(const RunOptions& o, const FramesStage& f) {
+  std::vector<ColmapFrame> frames;
+  for (size_t k = 0; k < f.names.size(); ++k) {
+    ColmapFrame cf{f.names[k], f.load(static_cast<int>(k)), cv::Mat()};
+    if (!o.masks.empty()) {
+      fs::path mp = o.masks / (f.names[k] + ".png");
+      if (fs::exists(mp)) {
+        cf.mask = cv::imread(mp.string(), cv::IMREAD_GRAYSCALE);
+        if (cf.mask.size() != cf.image.size())
+          cv::resize(cf.mask, cf.mask, cf.image.size(), 0, 0, cv::INTER_NEAREST);
+      }
+    }
+    frames.push_back(std::move(cf));
+  }
+  return frames;
+}
+
+ColmapOptions colmap_options(const RunOptions& o, const std::optional<Intrinsics>& K) {
+  ColmapOptions co;
+  co.matcher = o.matcher == "exhaustive" ? ColmapMatcher::exhaustive : ColmapMatcher::sequential;
+  co.max_image_size = o.colmap_long_side;
+  co.max_num_features = o.colmap_max_features;
+  co.intrinsics = K;
+  co.keyframes = parse_keyframe_mode(o.colmap_keyframes, "--colmap-keyframes");
+  return co;
+}
+
 PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::path& cache) {
   auto t0 = std::chrono::steady_clock::now();
   PosesStage st;
@@ -261,14 +289,10 @@ PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::
            o.poses_file.string());
     st.cameras = cameras_from_file(o, f, *K);
     st.source = o.poses_format + " file " + o.poses_file.string();
+    add_known_pose_points(o, f, *K, cache, st);
   } else {
     fs::path dir = cache / "colmap";
-    ColmapOptions co;
-    co.matcher = o.matcher == "exhaustive" ? ColmapMatcher::exhaustive : ColmapMatcher::sequential;
-    co.max_image_size = o.colmap_long_side;
-    co.max_num_features = o.colmap_max_features;
-    co.intrinsics = K;
-    co.keyframes = parse_keyframe_mode(o.colmap_keyframes, "--colmap-keyframes");
+    ColmapOptions co = colmap_options(o, K);
     fs::path model_dir = dir / "result_model";
     // What the cached model was made from: other settings, masks or frames mean another run.
     json key = {{"matcher", o.matcher},
@@ -292,20 +316,7 @@ PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::
         intrinsics_info = cached;
     } else {
       report(o, "poses", 0, 1, "running COLMAP");
-      std::vector<ColmapFrame> frames;
-      for (size_t k = 0; k < f.names.size(); ++k) {
-        ColmapFrame cf{f.names[k], f.load(static_cast<int>(k)), cv::Mat()};
-        if (!o.masks.empty()) {
-          fs::path mp = o.masks / (f.names[k] + ".png");
-          if (fs::exists(mp)) {
-            cf.mask = cv::imread(mp.string(), cv::IMREAD_GRAYSCALE);
-            if (cf.mask.size() != cf.image.size())
-              cv::resize(cf.mask, cf.mask, cf.image.size(), 0, 0, cv::INTER_NEAREST);
-          }
-        }
-        frames.push_back(std::move(cf));
-      }
-      ColmapResult r = run_colmap(frames, dir / "work", co);
+      ColmapResult r = run_colmap(colmap_frames(o, f), dir / "work", co);
       for (auto& w : r.warnings) spdlog::warn("poses: {}", w);
       if (!r.unregistered.empty())
         spdlog::warn("poses: COLMAP did not register {} frame(s): {}", r.unregistered.size(),

@@ -3,6 +3,7 @@
 #include <filesystem>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -11,6 +12,7 @@
 
 #include "models/depth_net.h"
 #include "pipeline/flow/pair_sampling.h"
+#include "pipeline/poses/colmap_runner.h"
 #include "pipeline/run/run_options.h"
 
 namespace cvd {
@@ -37,6 +39,9 @@ struct PosesStage {
 };
 PosesStage run_poses_stage(const RunOptions& o, const FramesStage& frames,
                            const std::filesystem::path& cache);
+// The frames (and --masks) as COLMAP's pose stage takes them, and its options from the run's.
+std::vector<ColmapFrame> colmap_frames(const RunOptions& o, const FramesStage& frames);
+ColmapOptions colmap_options(const RunOptions& o, const std::optional<Intrinsics>& K);
 
 struct FlowPairData {
   FramePair pair;

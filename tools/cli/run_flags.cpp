@@ -50,6 +50,11 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s) {
         }
         return "must be auto, all or a keyframe count of at least 2, got '" + v + "'";
       });
+  c->add_option("--sparse-points", o.sparse_points,
+                "With --poses: sparse points for the warm-up from flow tracks (flow), from "
+                "COLMAP's point_triangulator on the given poses (colmap), or colmap when it is on "
+                "PATH (auto)")
+      ->check(CLI::IsMember({"auto", "colmap", "flow"}));
   c->add_option("--colmap-features", o.colmap_max_features,
                 "Max SIFT features per frame for COLMAP");
   c->add_option("--masks", o.masks,

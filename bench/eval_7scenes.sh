@@ -14,7 +14,7 @@
 #   POSES="gt colmap" (which runs; suffixes: "+all" gives COLMAP's mapper every frame
 #   (--colmap-keyframes all) instead of keyframes; "+colmappts" (gt only) triangulates the sparse
 #   points with COLMAP on the given poses (--sparse-points colmap); "+refine", last, adds
-#   --refine-poses and reuses the cache of the run without it, so both start from the same poses
+#   --refine-poses $REFINE (default full) and reuses the cache of the run without it, so both start from the same poses
 #   and flow)
 # Needs jq; colmap on PATH for the COLMAP run (skipped with a note when absent).
 set -euo pipefail
@@ -49,7 +49,7 @@ for poses in $POSES; do
     extra+=(--sparse-points colmap)
   fi
   if [[ $base != "$poses" ]]; then
-    extra+=(--refine-poses)
+    extra+=(--refine-poses "${REFINE:-full}")
     if [[ -d "$out/$base/cache" ]]; then
       rm -rf "$run" && mkdir -p "$run" && cp -r "$out/$base/cache" "$run/cache"
       rm -rf "$run/cache/training"

@@ -8,6 +8,7 @@
 
 #include "engine/adam.h"
 #include "engine/autograd.h"
+#include "engine/error.h"
 #include "engine/ops.h"
 #include "engine/random.h"
 #include "pipeline/training/camera_refinement.h"
@@ -194,6 +195,41 @@ TEST(CameraRefinement, RelinearizeKeepsTheCamerasAndZeroesTheParameters) {
   }
   EXPECT_NEAR(other.focal_scale_value(), f_before, 1e-15);
   EXPECT_THROW(other.load_state(nlohmann::json{{"poses", nlohmann::json::array()}}), Error);
+}
+
+TEST(CameraRefinement, RotationOnlyRecoversRotationsAndLeavesCentresAlone) {
+  PlaneScene s;
+  std::vector<Pose> told = s.poses;
+  told[1].R = told[1].R * rot({0.2, 1, 0.1}, 0.5);
+  told[2].R = told[2].R * rot({1, -0.3, 0.2}, -0.5);
+  std::vector<std::pair<int, int>> pairs = {{0, 1}, {0, 2}, {1, 2}};
+  std::vector<PairDirection> ij, ji;
+  for (auto [i, j] : pairs) {
+    ij.push_back(s.direction(i, j, told[i], told[j], s.K));
+    ji.push_back(s.direction(j, i, told[j], told[i], s.K));
+  }
+  CameraRefinementOptions co;
+  co.translations = false;
+  CameraRefinement cams(told, 0, co, DType::f64);
+  EXPECT_TRUE(cams.translation_parameters().empty());
+  EXPECT_TRUE(cams.focal_parameters().empty());
+  AdamOptions ao;
+  ao.lr = co.lr_rotation;
+  Adam adam(cams.rotation_parameters(), ao);
+  for (int step = 0; step < 300; ++step) {
+    adam.zero_grad();
+    loss_with(cams, s, pairs, ij, ji).backward();
+    adam.step();
+    if ((step + 1) % 50 == 0) cams.relinearize();
+  }
+  std::vector<Pose> got = cams.poses();
+  for (int k = 1; k < 3; ++k) {
+    EXPECT_LT(angle_deg(got[k].R, s.poses[k].R), 0.03) << "frame " << k << " (started 0.5 deg off)";
+    EXPECT_EQ((got[k].t - told[k].t).norm(), 0.0) << "frame " << k;
+  }
+  CameraRefinementOptions bad;
+  bad.rotations = false;  // centres without rotations is not a mode
+  EXPECT_THROW(CameraRefinement(told, 0, bad, DType::f64), Error);
 }
 
 TEST(CameraRefinement, RecoversPerturbedPosesAndFocalFromExactFlow) {

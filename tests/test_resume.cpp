@@ -217,7 +217,7 @@ TEST_F(TinyClip, ARerunWithOtherTrainingSettingsStartsOverAndMoreEpochsContinue)
 TEST_F(TinyClip, RefinedCamerasContinueFromTheCheckpointToTheSameResult) {
   // The refined cameras are part of the epoch checkpoint: one epoch, then a rerun with two,
   // ends where an uninterrupted two-epoch run does (poses, focal and depth).
-  const std::string refine = " --refine-poses --refine-focal";
+  const std::string refine = " --refine-poses full --refine-focal";
   fs::path ref = work() / "refine_uninterrupted";
   CommandResult r = run_cvd(run_args(ref, 2) + refine);
   ASSERT_EQ(r.exit_code, 0) << r.output;

@@ -66,9 +66,10 @@ struct RunOptions {
   double lambda_disparity = -1;
   uint64_t seed = 1;
   int warmup_steps = 200;  // default network only: fit sparse SfM depth first
-  // Refine the camera rotations and centres (refine_poses) and the focal length (refine_focal)
-  // through the geometric loss while training (pipeline/training/camera_refinement.h).
-  bool refine_poses = false;
+  // Refine the cameras through the geometric loss while training
+  // (pipeline/training/camera_refinement.h): refine_poses "none", "rotation" (rotations only) or
+  // "full" (rotations and centres); refine_focal the focal length.
+  std::string refine_poses = "none";
   bool refine_focal = false;
   // Arithmetic of the CPU convolutions during the whole run: "f32" or "bf16" (AMX /
   // AVX512-BF16; engine/compute_precision.h). Weights, optimizer state and outputs stay f32.

@@ -318,7 +318,9 @@ RunResult run_pipeline(const RunOptions& o) {
     spdlog::info("training: epoch {}/{} mean loss {:.4f}", e, o.epochs, l);
   };
   std::unique_ptr<CameraRefinement> refinement;
-  if (o.refine_poses || o.refine_focal) {
+  CVD_CHECK(o.refine_poses == "none" || o.refine_poses == "rotation" || o.refine_poses == "full",
+            "refine_poses must be none, rotation or full, got '{}'", o.refine_poses);
+  if (o.refine_poses != "none" || o.refine_focal) {
     std::vector<Pose> start;
     int fixed = -1;
     for (int k = 0; k < n; ++k) {
@@ -326,7 +328,8 @@ RunResult run_pipeline(const RunOptions& o) {
       if (fixed < 0 && cams[k].registered) fixed = k;
     }
     CameraRefinementOptions co;
-    co.poses = o.refine_poses;
+    co.rotations = o.refine_poses != "none";
+    co.translations = o.refine_poses == "full";
     co.focal = o.refine_focal;
     refinement = std::make_unique<CameraRefinement>(start, std::max(fixed, 0), co);
     to.cameras = refinement.get();

@@ -71,9 +71,13 @@ CameraRefinement::CameraRefinement(std::vector<Pose> poses, int fixed,
                 options.sigma_log_focal > 0 && options.prior_weight >= 0,
             "camera refinement: prior widths must be positive");
   unit_ = median_baseline(poses_);
-  if (options_.poses) {
+  CVD_CHECK(options.rotations || !options.translations,
+            "camera refinement: translations are refined only with the rotations");
+  CVD_CHECK(options.start_epoch >= 0, "camera refinement: start epoch must be >= 0");
+  if (options_.rotations) {
     omega_ = Tensor::zeros({n, 3}, dtype_).requires_grad_();
-    upsilon_ = Tensor::zeros({n, 3}, dtype_).requires_grad_();
+    upsilon_ = Tensor::zeros({n, 3}, dtype_);  // stays zero unless translations are refined
+    if (options_.translations) upsilon_.requires_grad_();
   }
   if (options_.focal) log_focal_param_ = Tensor::zeros({1}, dtype_).requires_grad_();
 }
@@ -82,7 +86,8 @@ std::vector<Tensor> CameraRefinement::rotation_parameters() const {
   return omega_.defined() ? std::vector<Tensor>{omega_} : std::vector<Tensor>{};
 }
 std::vector<Tensor> CameraRefinement::translation_parameters() const {
-  return upsilon_.defined() ? std::vector<Tensor>{upsilon_} : std::vector<Tensor>{};
+  return options_.translations && upsilon_.defined() ? std::vector<Tensor>{upsilon_}
+                                                     : std::vector<Tensor>{};
 }
 std::vector<Tensor> CameraRefinement::focal_parameters() const {
   return log_focal_param_.defined() ? std::vector<Tensor>{log_focal_param_} : std::vector<Tensor>{};
@@ -103,7 +108,7 @@ Tensor CameraRefinement::translation(int k) const {
   CVD_CHECK(k >= 0 && k < num_frames(), "camera refinement: frame {} out of range", k);
   const Eigen::Vector3d& t = poses_[k].t;
   Tensor c = Tensor::from_vector(std::vector<double>{t.x(), t.y(), t.z()}, {3, 1}, dtype_);
-  if (!upsilon_.defined() || k == fixed_) return c;
+  if (!options_.translations || !upsilon_.defined() || k == fixed_) return c;
   return add(c, mul_scalar(upsilon_.narrow(0, k, 1).reshape({3, 1}), unit_));
 }
 
@@ -237,7 +242,18 @@ nlohmann::json CameraRefinement::summary() const {
     t_max = std::max(t_max, t);
   }
   double n = static_cast<double>(now.size());
-  return {{"poses", options_.poses},
+  // Rotation between consecutive frames, before and after (what RPE at step 1 sees).
+  double rel_sum = 0;
+  for (size_t k = 1; k < now.size(); ++k) {
+    Eigen::Matrix3d a = initial_[k - 1].R.transpose() * initial_[k].R;
+    Eigen::Matrix3d b = now[k - 1].R.transpose() * now[k].R;
+    rel_sum += log_so3(a.transpose() * b).norm() * kDegPerRad;
+  }
+  return {{"rotations", options_.rotations},
+          {"translations", options_.translations},
+          {"start_epoch", options_.start_epoch},
+          {"consecutive_rotation_change_deg",
+           now.size() > 1 ? rel_sum / static_cast<double>(now.size() - 1) : 0.0},
           {"focal", options_.focal},
           {"fixed_frame", fixed_},
           {"translation_unit", unit_},

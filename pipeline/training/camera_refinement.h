@@ -22,8 +22,11 @@
 namespace cvd {
 
 struct CameraRefinementOptions {
-  bool poses = true;   // refine rotations and camera centres
-  bool focal = false;  // refine the focal length
+  bool rotations = true;     // refine the rotations
+  bool translations = true;  // refine the camera centres (needs rotations)
+  bool focal = false;        // refine the focal length
+  // Epochs the network trains alone before the cameras join (it first settles on the start).
+  int start_epoch = 1;
   // Adam step sizes: radians, units of s, log focal.
   double lr_rotation = 2e-4;
   double lr_translation = 2e-3;
@@ -45,8 +48,8 @@ class CameraRefinement {
                    DType dtype = DType::f32);
 
   const CameraRefinementOptions& options() const { return options_; }
-  // The trainable tensors: rotation corrections [N, 3], translation corrections [N, 3] (when poses
-  // are refined) and the log focal scale [1] (when the focal is); empty when nothing is refined.
+  // The trainable tensors: rotation corrections [N, 3], translation corrections [N, 3] and the log
+  // focal scale [1], each when it is refined (empty otherwise).
   std::vector<Tensor> rotation_parameters() const;
   std::vector<Tensor> translation_parameters() const;
   std::vector<Tensor> focal_parameters() const;

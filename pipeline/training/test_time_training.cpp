@@ -189,7 +189,10 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
   ao.beta1 = 0.9;
   ao.beta2 = 0.999;
   Adam adam(net.parameters(), ao);
+  const size_t camera_groups_from = adam.num_groups();
   if (o.cameras) add_camera_groups(adam, *o.cameras, ao);
+  std::vector<double> camera_lrs;
+  for (size_t g = camera_groups_from; g < adam.num_groups(); ++g) camera_lrs.push_back(adam.lr(g));
   Generator rng(o.seed);
   TrainingResult result;
   Checkpoint ck;
@@ -215,6 +218,10 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
   std::vector<size_t> order(pairs.size());
   int steps_per_epoch = static_cast<int>((pairs.size() + o.batch_pairs - 1) / o.batch_pairs);
   for (int epoch = ck.epoch; epoch < o.epochs; ++epoch) {
+    // The cameras join after their start epoch (step size 0 before; Adam's moments stay zero).
+    for (size_t g = 0; g < camera_lrs.size(); ++g)
+      adam.set_lr(camera_groups_from + g,
+                  epoch >= o.cameras->options().start_epoch ? camera_lrs[g] : 0.0);
     for (size_t k = 0; k < order.size(); ++k) order[k] = k;
     std::shuffle(order.begin(), order.end(), rng.engine());
     double sum = 0;

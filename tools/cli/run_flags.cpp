@@ -82,9 +82,11 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s) {
                 "Weight of the disparity term; < 0: per architecture (" + lambda_defaults + ")");
   c->add_option("--seed", o.seed, "Random seed");
   c->add_option("--warmup", o.warmup_steps, "Sparse-depth warm-up steps of the default network");
-  c->add_flag("--refine-poses", o.refine_poses,
-              "Refine the camera rotations and centres with the depth (through the geometric "
-              "loss; the first camera stays fixed); outputs carry the refined poses");
+  c->add_option("--refine-poses", o.refine_poses,
+                "Refine the cameras with the depth through the geometric loss: none, rotation, or "
+                "full (rotations and centres); the first camera stays fixed and the outputs carry "
+                "the refined poses")
+      ->check(CLI::IsMember({"none", "rotation", "full"}));
   c->add_flag("--refine-focal", o.refine_focal,
               "Refine the focal length with the depth (one scale for the video)");
   c->add_option("--precision", o.precision,

@@ -32,6 +32,8 @@ RunOptions to_run_options(const PipelineOptions& p) {
   o.colmap_long_side = p.colmap_long_side;
   o.colmap_max_features = p.colmap_max_features;
   o.masks = p.masks;
+  o.colmap_keyframes = p.colmap_keyframes;
+  o.sparse_points = p.sparse_points;
   o.flow = p.flow;
   o.dis_preset = p.dis_preset;
   o.flow_model = p.flow_model;
@@ -43,9 +45,12 @@ RunOptions to_run_options(const PipelineOptions& p) {
   o.lambda_disparity = p.lambda_disparity;
   o.seed = p.seed;
   o.warmup_steps = p.warmup_steps;
+  o.refine_poses = p.refine_poses;
+  o.refine_focal = p.refine_focal;
   o.precision = p.precision;
   o.write_videos = p.write_videos;
   o.write_point_cloud = p.write_point_cloud;
+  o.depth_formats = p.depth_formats;
   o.gt = p.gt;
   if (p.progress)
     o.progress = [cb = p.progress](const RunProgress& r) {

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <string>
 #include <vector>
@@ -196,6 +197,30 @@ TEST(PublicApi, PipelineReportsProgressAndReturnsResultsInMemory) {
   EXPECT_TRUE(some_stage_completed);
   EXPECT_TRUE(last.count("training")) << "no training progress reported";
   fs::remove_all(dir);
+}
+
+TEST(PublicApi, PipelineRejectsUnknownSettingsBeforeCreatingAnything) {
+  // The CLI checks these values; library callers reach run_pipeline directly.
+  const std::vector<std::function<void(cvd::PipelineOptions&)>> bad = {
+      [](cvd::PipelineOptions& o) { o.refine_poses = "yes"; },
+      [](cvd::PipelineOptions& o) { o.sparse_points = "sift"; },
+      [](cvd::PipelineOptions& o) { o.colmap_keyframes = "1"; },
+      [](cvd::PipelineOptions& o) {
+        o.depth_formats = {"pfm", "tiff"};
+      }};
+  for (size_t k = 0; k < bad.size(); ++k) {
+    const fs::path dir = fresh_dir("bad_setting_" + std::to_string(k));
+    cvd::PipelineOptions o = short_run(dir, 4);
+    o.out = (dir / "never_created").string();
+    bad[k](o);
+    try {
+      cvd::Pipeline(o).run();
+      ADD_FAILURE() << "setting " << k << " was accepted";
+    } catch (const cvd::Error& e) {
+      EXPECT_EQ(e.category(), cvd::ErrorCategory::invalid_argument) << e.what();
+    }
+    EXPECT_FALSE(fs::exists(dir / "never_created")) << "setting " << k;
+  }
 }
 
 TEST(PublicApi, PipelineStopsWithCancelledWhenTheFlagIsSet) {

@@ -53,6 +53,12 @@ struct PipelineOptions {
   int colmap_long_side = 640;          ///< --colmap-size
   int colmap_max_features = 4096;      ///< --colmap-features
   std::string masks;                   ///< --masks: folder of masks passed to COLMAP
+  /// --colmap-keyframes: "auto" (keyframes spaced by image motion on long clips, the other frames
+  /// registered to them), "all", or a keyframe count
+  std::string colmap_keyframes = "auto";
+  /// --sparse-points (with poses_file): "flow" (flow tracks), "colmap" (COLMAP's
+  /// point_triangulator on the given poses) or "auto" (colmap when it is on PATH)
+  std::string sparse_points = "flow";
 
   // Flow
   std::string flow = "dis";           ///< --flow: dis | flownet2
@@ -68,6 +74,10 @@ struct PipelineOptions {
   double lambda_disparity = -1;  ///< --lambda
   std::uint64_t seed = 1;        ///< --seed
   int warmup_steps = 200;        ///< --warmup
+  /// --refine-poses: "none", "rotation" or "full" (rotations and centres), refined with the depth
+  /// through the geometric loss; the results carry the refined cameras
+  std::string refine_poses = "none";
+  bool refine_focal = false;  ///< --refine-focal: one focal scale for the video
   /// --precision: "f32" or "bf16" (CPU convolutions on AMX / AVX512-BF16 with f32 accumulation;
   /// weights, optimizer state and outputs stay f32). bf16 on a CPU without native bf16 throws
   /// Error(ErrorCategory::unsupported).
@@ -76,6 +86,9 @@ struct PipelineOptions {
   // Outputs
   bool write_videos = true;       ///< !--no-videos
   bool write_point_cloud = true;  ///< !--no-ply
+  /// --formats: depth map formats, any of "pfm" (depth/), "png16" (depth_png16/), "color"
+  /// (depth_color/), "npy" (depth.npy, N x H x W float32, with frames.txt)
+  std::vector<std::string> depth_formats = {"pfm", "png16", "color"};
 
   std::string gt;  ///< --gt: ground-truth folder to evaluate against
 

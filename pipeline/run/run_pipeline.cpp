@@ -26,6 +26,7 @@
 #include "pipeline/io/frame_source.h"
 #include "pipeline/io/output_lock.h"
 #include "pipeline/io/pfm_io.h"
+#include "pipeline/poses/keyframe_selection.h"
 #include "pipeline/run/run_outputs.h"
 #include "pipeline/run/run_stages.h"
 #include "pipeline/training/network_start.h"
@@ -139,7 +140,16 @@ RunResult run_pipeline(const RunOptions& o) {
   auto t_all = Clock::now();
   CVD_CHECK(!o.input.empty(), "no input video or folder given");
   CVD_CHECK(!o.out.empty(), "no output directory given");
-  // Before anything is created: an unknown precision or bf16 without CPU support is an error.
+  // Before anything is created: unknown settings (the library's callers bypass the CLI's
+  // checks), an unknown precision or bf16 without CPU support are errors.
+  CVD_CHECK(o.refine_poses == "none" || o.refine_poses == "rotation" || o.refine_poses == "full",
+            "refine_poses must be none, rotation or full, got '{}'", o.refine_poses);
+  CVD_CHECK(o.sparse_points == "flow" || o.sparse_points == "colmap" || o.sparse_points == "auto",
+            "sparse_points must be flow, colmap or auto, got '{}'", o.sparse_points);
+  parse_keyframe_mode(o.colmap_keyframes, "colmap_keyframes");
+  for (const std::string& f : o.depth_formats)
+    CVD_CHECK(f == "pfm" || f == "png16" || f == "color" || f == "npy",
+              "unknown depth format '{}' (expected pfm, png16, color or npy)", f);
   const ComputePrecision precision = parse_precision(o.precision);
   ScopedComputePrecision precision_scope(precision);
   // Check the input before creating anything, so a typo leaves no output folder behind.
@@ -318,8 +328,6 @@ RunResult run_pipeline(const RunOptions& o) {
     spdlog::info("training: epoch {}/{} mean loss {:.4f}", e, o.epochs, l);
   };
   std::unique_ptr<CameraRefinement> refinement;
-  CVD_CHECK(o.refine_poses == "none" || o.refine_poses == "rotation" || o.refine_poses == "full",
-            "refine_poses must be none, rotation or full, got '{}'", o.refine_poses);
   if (o.refine_poses != "none" || o.refine_focal) {
     std::vector<Pose> start;
     int fixed = -1;

@@ -6,6 +6,8 @@
 
 #include "engine/autograd.h"
 #include "engine/ops.h"
+#include "engine/process_group.h"
+#include "engine/sync_batch_norm.h"
 
 namespace cvd {
 
@@ -188,6 +190,7 @@ Tensor BatchNorm2d::forward(const Tensor& x) {
     p.momentum = 0.0;
     Tensor rm = Tensor::zeros({options_.num_features}, x.dtype(), x.device());
     Tensor rv = Tensor::ones({options_.num_features}, x.dtype(), x.device());
+    if (sync_batch_norm_active()) return sync_batch_norm(x, rm, rv, weight, bias, p);
     return batch_norm(x, rm, rv, weight, bias, p);
   }
   p.momentum = 0.0;
@@ -196,6 +199,8 @@ Tensor BatchNorm2d::forward(const Tensor& x) {
     num_batches_tracked.fill_(n);
     p.momentum = options_.momentum ? *options_.momentum : 1.0 / n;
   }
+  if (batch_stats && sync_batch_norm_active())
+    return sync_batch_norm(x, running_mean, running_var, weight, bias, p);
   return batch_norm(x, running_mean, running_var, weight, bias, p);
 }
 

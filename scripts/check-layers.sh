@@ -6,7 +6,7 @@
 #
 #   scripts/check-layers.sh SOURCE_DIR [libcvd_engine.a libcvd_kernels_reference.a
 #       libcvd_kernels_cpu.a libcvd_kernels_cuda.a libcvd_kernels.a libcvd_models.a
-#       libcvd_pipeline.a libcvd_scene.a libcvd_convert.a]
+#       libcvd_pipeline.a libcvd_scene.a libcvd_convert.a libcvd_mpi.a]
 # (ctest runs it as check_layers with the libraries of the build.)
 set -euo pipefail
 root=$1
@@ -24,8 +24,9 @@ declare -A allowed=(
   [pipeline]="engine kernels models pipeline"
   [scene]="engine pipeline scene"
   [tools/convert]="engine models tools/convert"
+  [tools/distributed]="engine tools/distributed"
   [api]="api engine kernels models pipeline"
-  [tools/cli]="engine kernels models pipeline scene tools/convert tools/cli"
+  [tools/cli]="engine kernels models pipeline scene tools/convert tools/distributed tools/cli"
 )
 
 status=0
@@ -63,11 +64,12 @@ for layer in "${!allowed[@]}"; do
 done
 
 if [ $# -gt 0 ]; then
-  if [ $# -ne 9 ]; then
-    echo "check-layers: expected 9 libraries, got $#" >&2
+  if [ $# -ne 10 ]; then
+    echo "check-layers: expected 10 libraries, got $#" >&2
     exit 2
   fi
-  names=(engine kernels/reference kernels/cpu kernels/cuda kernels models pipeline scene tools/convert)
+  names=(engine kernels/reference kernels/cpu kernels/cuda kernels models pipeline scene tools/convert
+    tools/distributed)
   libs=("$@")
   declare -A lib
   for i in "${!names[@]}"; do lib[${names[$i]}]=${libs[$i]}; done
@@ -82,6 +84,7 @@ if [ $# -gt 0 ]; then
     [pipeline]="engine kernels/reference kernels/cpu kernels/cuda kernels models"
     [scene]="engine kernels/reference kernels/cpu kernels/cuda kernels models pipeline"
     [tools/convert]="engine models"
+    [tools/distributed]="engine"
   )
   tmp=$(mktemp -d)
   trap 'rm -rf "$tmp"' EXIT

@@ -16,6 +16,8 @@ pkgs=(
   # libFuzzer and clang's sanitizer runtimes (only recommended by clang, so not pulled in by
   # --no-install-recommends): tests/fuzz/run_fuzzers.sh links -fsanitize=fuzzer against them.
   libclang-rt-14-dev
+  # MPI (issue 21): data-parallel training and sharded flow over mpirun; optional at build time.
+  libopenmpi-dev openmpi-bin
 )
 if [ "${CVD_WITH_PYTHON:-0}" = "1" ]; then
   pkgs+=(python3-torch python3-torchvision python3-onnx python3-numpy)

@@ -21,6 +21,7 @@
 #include <thread>
 
 #include "pipeline/io/pfm_io.h"
+#include "tests/run_output_compare.h"
 #include "tests/test_support.h"
 
 namespace cvd::test {
@@ -91,25 +92,6 @@ pid_t spawn_cvd(const std::string& args, const fs::path& log) {
 std::string slurp(const fs::path& p) {
   std::ifstream f(p);
   return std::string(std::istreambuf_iterator<char>(f), {});
-}
-
-// Largest |a - b| / max(|b|, 1e-6) over all pixels of the depth PFMs of two runs.
-double max_relative_depth_difference(const fs::path& a, const fs::path& b, int& files) {
-  double worst = 0;
-  files = 0;
-  for (const auto& e : fs::directory_iterator(a / "depth")) {
-    if (e.path().extension() != ".pfm") continue;
-    cv::Mat da = read_pfm(e.path()), db = read_pfm(b / "depth" / e.path().filename());
-    EXPECT_EQ(da.size(), db.size()) << e.path();
-    if (da.size() != db.size()) return INFINITY;
-    for (int y = 0; y < da.rows; ++y)
-      for (int x = 0; x < da.cols; ++x) {
-        double va = da.at<float>(y, x), vb = db.at<float>(y, x);
-        worst = std::max(worst, std::abs(va - vb) / std::max(std::abs(vb), 1e-6));
-      }
-    ++files;
-  }
-  return worst;
 }
 
 TEST_F(TinyClip, KilledDuringTrainingResumesToTheSameDepth) {

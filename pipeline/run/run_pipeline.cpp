@@ -7,6 +7,7 @@
 #include <chrono>
 #include <memory>
 #include <opencv2/imgproc.hpp>
+#include <optional>
 
 #include "engine/adam.h"
 #include "engine/autograd.h"
@@ -15,6 +16,7 @@
 #include "engine/cvdw.h"
 #include "engine/module_weights.h"
 #include "engine/ops.h"
+#include "engine/process_group.h"
 #include "kernels/builtin_backends.h"
 #include "models/depth_net_architectures.h"
 #include "pipeline/eval/eval_sparse.h"
@@ -93,16 +95,42 @@ SparseDepth project_points(const FrameCamera& c, const std::vector<Eigen::Vector
   return s;
 }
 
+// Depth of every frame (eval mode). Several processes: frame k on rank k % R, then each map
+// broadcast from its rank, so every process holds all of them.
 std::vector<cv::Mat> infer_depths(DepthNet& net, const std::function<Tensor(int)>& load_frame,
-                                  int n, const RunOptions& o, const std::string& stage) {
+                                  int n, cv::Size size, const RunOptions& o,
+                                  const std::string& stage) {
   NoGradGuard ng;
   net.eval();
-  std::vector<cv::Mat> r;
-  for (int k = 0; k < n; ++k) {
-    r.push_back(depth_to_mat(net.depth(load_frame(k).unsqueeze(0)).squeeze(0).squeeze(0)));
+  ProcessGroup& pg = process_group();
+  std::vector<cv::Mat> r(static_cast<size_t>(n));
+  for (int k = pg.rank(); k < n; k += pg.size()) {
+    r[size_t(k)] = depth_to_mat(net.depth(load_frame(k).unsqueeze(0)).squeeze(0).squeeze(0));
     if (o.progress) o.progress({stage, k + 1, n, ""});
   }
+  if (pg.size() > 1)
+    for (int k = 0; k < n; ++k) {
+      if (r[size_t(k)].empty()) r[size_t(k)] = cv::Mat(size, CV_32F);
+      CVD_CHECK(r[size_t(k)].isContinuous() && r[size_t(k)].type() == CV_32F,
+                "infer_depths: unexpected depth map layout");
+      pg.broadcast(r[size_t(k)].data, r[size_t(k)].total() * sizeof(float), k % pg.size());
+    }
   return r;
+}
+
+// Runs `stage` on rank 0 first, then (after it finished) on the other processes, which then
+// find its results in the cache. One process: just runs it.
+template <class F>
+auto rank0_first(F&& stage) {
+  ProcessGroup& pg = process_group();
+  if (pg.size() == 1) return stage();
+  if (pg.rank() == 0) {
+    auto r = stage();
+    pg.barrier();
+    return r;
+  }
+  pg.barrier();
+  return stage();
 }
 
 // Fingerprint of the cameras training sees (a rerun of COLMAP gives other poses).
@@ -163,8 +191,13 @@ RunResult run_pipeline(const RunOptions& o) {
   if (ec || !fs::is_directory(o.out))
     fail(ErrorCategory::io, "{}: cannot create the output directory ({})", o.out.string(),
          ec ? ec.message() : "a file of that name exists");
-  // One run per output folder: a second one fails here, before touching anything.
-  const OutputFolderLock lock(o.out);
+  // One run per output folder: a second one fails here, before touching anything. Several
+  // processes of one job (mpirun) share the folder: rank 0 holds the lock and writes every
+  // final output; the others read the caches it wrote.
+  ProcessGroup& pg = process_group();
+  std::optional<OutputFolderLock> lock;
+  if (pg.rank() == 0) lock.emplace(o.out);
+  if (pg.size() > 1) spdlog::info("{}: rank {} of {}", pg.name(), pg.rank(), pg.size());
   fs::path cache = o.out / "cache";
   json info = {
       {"version", CVD_VERSION}, {"input", o.input.string()}, {"backends", compiled_backends()}};
@@ -172,7 +205,7 @@ RunResult run_pipeline(const RunOptions& o) {
 
   // 1. Frames
   auto t = Clock::now();
-  FramesStage frames = run_frames_stage(o, cache);
+  FramesStage frames = rank0_first([&] { return run_frames_stage(o, cache); });
   timings["frames"] = since(t);
   const int n = static_cast<int>(frames.names.size());
 
@@ -188,7 +221,7 @@ RunResult run_pipeline(const RunOptions& o) {
 
   // 3. Poses
   t = Clock::now();
-  PosesStage poses = run_poses_stage(o, frames, cache);
+  PosesStage poses = rank0_first([&] { return run_poses_stage(o, frames, cache); });
   timings["poses"] = since(t);
   std::vector<FrameCamera> cams = poses.cameras;
   for (auto& c : cams) c.intrinsics = c.intrinsics.scaled_to(dsize.width, dsize.height);
@@ -265,14 +298,21 @@ RunResult run_pipeline(const RunOptions& o) {
       };
     }
     std::vector<std::string> start_warnings;
-    calib = start_default_network(*net, load_frame, sparse, so, &start_warnings);
-    if (!start_warnings.empty()) calib["warnings"] = start_warnings;
+    // Rank 0 warms the network up; the others receive its weights.
+    if (pg.rank() == 0) {
+      calib = start_default_network(*net, load_frame, sparse, so, &start_warnings);
+      if (!start_warnings.empty()) calib["warnings"] = start_warnings;
+    }
+    if (pg.size() > 1) {
+      broadcast_module(*net, 0);
+      calib = json::parse(broadcast_string(calib.dump(), 0));
+    }
     calib["method"] =
         "default network: a flat plane at the median sparse depth (zero output head), then a "
         "warm-up on sparse depths kept as far as it beats the plane on held-out points; poses "
         "keep their units";
   }
-  std::vector<cv::Mat> initial = infer_depths(*net, load_frame, n, o, "initial depth");
+  std::vector<cv::Mat> initial = infer_depths(*net, load_frame, n, dsize, o, "initial depth");
   if (!o.model.empty()) {
     ScaleCalibrationResult sc = calibrate_scale(cams, initial, points);
     CVD_CHECK(sc.num_valid() > 0, "scale calibration: no frame has enough sparse points");
@@ -366,12 +406,20 @@ RunResult run_pipeline(const RunOptions& o) {
                  refinement_info["rotation_change_deg"]["mean"].get<double>(), fs);
   }
 
-  // 8. Outputs (a failure while writing them, e.g. a full disk, removes the partial ones)
+  // 8. Outputs (a failure while writing them, e.g. a full disk, removes the partial ones);
+  // rank 0 writes them.
   t = Clock::now();
-  PartialOutputsGuard partial_outputs(o.out);
   RunOutputs outs;
+  outs.depths = infer_depths(*net, load_frame, n, dsize, o, "final depth");
+  if (pg.rank() != 0) {
+    res.frame_names = frames.names;
+    res.cameras = cams;
+    res.depths = outs.depths;
+    res.epoch_losses = tr.epoch_losses;
+    return res;
+  }
+  PartialOutputsGuard partial_outputs(o.out);
   outs.names = frames.names;
-  outs.depths = infer_depths(*net, load_frame, n, o, "final depth");
   outs.cameras = cams;
   outs.fps = frames.fps;
   for (int k = 0; k < n; ++k) {
@@ -438,6 +486,8 @@ RunResult run_pipeline(const RunOptions& o) {
     if (!sparse_info.is_null()) info["sparse_points"]["triangulation"] = sparse_info;
   }
   info["pairs"] = {{"kept", res.num_pairs}, {"dropped", flow.dropped}};
+  info["processes"] = {{"count", pg.size()}, {"group", pg.name()}};
+  if (pg.size() > 1) info["processes"]["allreduce_bytes_per_step"] = tr.bytes_per_step;
   info["training"] = {{"epochs", o.epochs},
                       {"batch_pairs", to.batch_pairs},
                       {"lr", to.lr},

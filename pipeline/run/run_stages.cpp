@@ -12,6 +12,7 @@
 #include <set>
 
 #include "engine/error.h"
+#include "engine/process_group.h"
 #include "pipeline/flow/flow_dis.h"
 #include "pipeline/flow/flow_flownet2.h"
 #include "pipeline/flow/flow_pair.h"
@@ -448,7 +449,8 @@ FlowStage run_flow_stage(const RunOptions& o, const FramesStage& f, const PosesS
               {"frames_w", f.width}};
   int done = 0;
   std::map<int, ImageKeypoints> keypoint_cache;
-  for (const FramePair& p : pairs) {
+  // One pair: from the cache when it holds it, else computed and cached.
+  auto run_pair = [&](const FramePair& p) {
     std::string stem = fmt::format("{}__{}", f.names[p.first], f.names[p.second]);
     fs::path meta = dir / (stem + ".json");
     FlowPairData d;
@@ -502,11 +504,26 @@ FlowStage run_flow_stage(const RunOptions& o, const FramesStage& f, const PosesS
                  {"homography_fallback", r.homography.reason}};
       write_text_file(meta, mj.dump());
     }
+    report(o, "flow", ++done, static_cast<int>(pairs.size()), stem);
+    return d;
+  };
+  // Several processes (mpirun): pair k is computed by rank k % R; after all finished, each
+  // reads the others' pairs from the cache (same files as one process writes, so a rerun with
+  // another R resumes).
+  ProcessGroup& pg = process_group();
+  std::vector<FlowPairData> results(pairs.size());
+  for (size_t k = static_cast<size_t>(pg.rank()); k < pairs.size(); k += size_t(pg.size()))
+    results[k] = run_pair(pairs[k]);
+  if (pg.size() > 1) {
+    pg.barrier();
+    for (size_t k = 0; k < pairs.size(); ++k)
+      if (static_cast<int>(k % size_t(pg.size())) != pg.rank()) results[k] = run_pair(pairs[k]);
+  }
+  for (FlowPairData& d : results) {
     if (!d.forward.empty())
       st.pairs.push_back(std::move(d));
     else
       ++st.dropped;
-    report(o, "flow", ++done, static_cast<int>(pairs.size()), stem);
   }
   if (st.pairs.empty())
     fail(ErrorCategory::invalid_argument,

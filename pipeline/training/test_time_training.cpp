@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <csignal>
+#include <cstdio>
 #include <cstdlib>
 #include <fstream>
 #include <limits>
@@ -14,7 +16,9 @@
 #include "engine/autograd.h"
 #include "engine/module_weights.h"
 #include "engine/ops.h"
+#include "engine/process_group.h"
 #include "pipeline/io/atomic_file.h"
+#include "pipeline/training/data_parallel_step.h"
 
 namespace cvd {
 
@@ -86,42 +90,12 @@ bool load_checkpoint(const fs::path& dir, DepthNet& net, Adam& adam, Checkpoint&
   return true;
 }
 
-// Depth [H, W] of every frame used by a batch, from one network forward over the stacked frames.
-std::map<int, Tensor> batch_depths(DepthNet& net, const std::function<Tensor(int)>& load_frame,
-                                   const std::vector<const TrainingPair*>& batch) {
-  std::vector<int> frames;
-  for (auto* p : batch) {
-    frames.push_back(p->i);
-    frames.push_back(p->j);
-  }
-  std::sort(frames.begin(), frames.end());
-  frames.erase(std::unique(frames.begin(), frames.end()), frames.end());
-  std::vector<Tensor> imgs;
-  for (int f : frames) imgs.push_back(load_frame(f).unsqueeze(0));
-  Tensor depth = net.depth(concat(imgs, 0));  // [n, 1, H, W]
-  std::map<int, Tensor> r;
-  for (size_t k = 0; k < frames.size(); ++k)
-    r[frames[k]] = depth.narrow(0, static_cast<int64_t>(k), 1).squeeze(0).squeeze(0);
-  return r;
-}
-
-Tensor pair_loss(const Tensor& depth_i, const Tensor& depth_j, const TrainingPair& p,
-                 const GeometricLossOptions& lo, const CameraRefinement* cameras) {
-  if (!cameras) return geometric_loss_pair(depth_i, depth_j, p.ij, p.ji, lo).total;
-  PairCameras pc = cameras->pair(p.i, p.j);
-  return geometric_loss_pair(depth_i, depth_j, p.ij, p.ji, lo, &pc).total;
-}
-
-Tensor batch_loss(const std::map<int, Tensor>& depths,
-                  const std::vector<const TrainingPair*>& batch, const GeometricLossOptions& lo,
-                  const CameraRefinement* cameras) {
-  Tensor total;
-  for (auto* p : batch) {
-    Tensor l = pair_loss(depths.at(p->i), depths.at(p->j), *p, lo, cameras);
-    total = total.defined() ? add(total, l) : l;
-  }
-  total = mul_scalar(total, 1.0 / static_cast<double>(batch.size()));
-  return cameras ? add(total, cameras->prior()) : total;
+std::vector<Tensor> camera_parameters(const CameraRefinement& cameras) {
+  std::vector<Tensor> all;
+  for (const auto& group : {cameras.rotation_parameters(), cameras.translation_parameters(),
+                            cameras.focal_parameters()})
+    all.insert(all.end(), group.begin(), group.end());
+  return all;
 }
 
 // The cameras' parameter groups, each with its own step size.
@@ -178,6 +152,23 @@ NanLossFault nan_loss_fault_from_env() {
   return f;
 }
 
+// Fault injection for the multi-process tests: CVD_FAULT_KILL_RANK="1:3" makes rank 1 kill
+// itself (SIGKILL, no clean-up) at training step 3 (counted as for CVD_FAULT_NAN_LOSS_STEPS).
+void maybe_kill_this_rank(int step) {
+  static const std::pair<int, int> fault = [] {
+    const char* v = std::getenv("CVD_FAULT_KILL_RANK");
+    int rank = -1, at = -1;
+    if (v && std::sscanf(v, "%d:%d", &rank, &at) != 2)
+      fail(ErrorCategory::invalid_argument, "CVD_FAULT_KILL_RANK='{}': expected RANK:STEP", v);
+    return std::pair<int, int>{rank, at};
+  }();
+  if (fault.first == process_group().rank() && fault.second == step) {
+    spdlog::warn("fault injection: CVD_FAULT_KILL_RANK kills rank {} at step {}", fault.first,
+                 step);
+    std::raise(SIGKILL);
+  }
+}
+
 }  // namespace
 
 TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& load_frame,
@@ -215,6 +206,10 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
   lo.lambda_disparity = o.lambda_disparity;
   const NanLossFault nan_fault = nan_loss_fault_from_env();
   net.train(true);
+  ProcessGroup& pg = process_group();
+  std::vector<Tensor> trained = net.parameters();
+  if (o.cameras)
+    for (const Tensor& t : camera_parameters(*o.cameras)) trained.push_back(t);
   std::vector<size_t> order(pairs.size());
   int steps_per_epoch = static_cast<int>((pairs.size() + o.batch_pairs - 1) / o.batch_pairs);
   for (int epoch = ck.epoch; epoch < o.epochs; ++epoch) {
@@ -227,22 +222,23 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
     double sum = 0;
     int counted = 0;
     for (int s = 0; s < steps_per_epoch; ++s) {
-      if (o.cancelled && o.cancelled()) fail(ErrorCategory::cancelled, "training cancelled");
       std::vector<const TrainingPair*> batch;
       for (size_t k = s * o.batch_pairs; k < std::min(order.size(), size_t(s + 1) * o.batch_pairs);
            ++k)
         batch.push_back(&pairs[order[k]]);
       adam.zero_grad();
-      Tensor loss = batch_loss(batch_depths(net, load_frame, batch), batch, lo, o.cameras);
-      double v = loss.item();
-      if (nan_fault.hits(epoch * steps_per_epoch + s + 1))
-        v = std::numeric_limits<double>::quiet_NaN();
-      if (!std::isfinite(v)) {
+      maybe_kill_this_rank(epoch * steps_per_epoch + s + 1);
+      const bool inject_nan = nan_fault.hits(epoch * steps_per_epoch + s + 1);
+      const BatchStep step = batch_gradients(net, load_frame, batch, lo, o.cameras, trained,
+                                             o.cancelled && o.cancelled(), inject_nan);
+      if (step.stop) fail(ErrorCategory::cancelled, "training cancelled");
+      const double v = step.loss;
+      if (!step.applied) {
         ++result.skipped_steps;
         spdlog::warn("training: epoch {} step {}: non-finite loss, step skipped", epoch + 1, s + 1);
         continue;
       }
-      loss.backward();
+      result.bytes_per_step = step.bytes_all_reduced;
       adam.step();
       ++result.steps;
       sum += v;
@@ -254,11 +250,18 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
            "training diverged: every step of epoch {} had a non-finite loss ({} steps skipped in "
            "all); try a lower --lr, or check the poses and flow",
            epoch + 1, result.skipped_steps);
+    if (pg.size() > 1) {
+      // Every process took the same steps; rank 0's values remove any rounding difference
+      // between the processes' sums, and its batch-norm statistics count the steps that ran on
+      // rank 0 alone (fewer frames than processes).
+      broadcast_module(net, 0);
+      if (o.cameras) broadcast_tensors(camera_parameters(*o.cameras), 0);
+    }
     if (o.cameras) o.cameras->relinearize();
     double mean_loss = sum / counted;
     result.epoch_losses.push_back(mean_loss);
     if (o.on_epoch) o.on_epoch(epoch + 1, mean_loss);
-    if (!o.checkpoint_dir.empty()) {
+    if (!o.checkpoint_dir.empty() && pg.rank() == 0) {  // rank 0 writes, for every process
       ck.epoch = epoch + 1;
       ck.rng_state = rng.state();
       ck.losses = result.epoch_losses;
@@ -281,11 +284,15 @@ double evaluate_geometric_loss(DepthNet& net, const std::function<Tensor(int)>& 
   lo.lambda_disparity = lambda_disparity;
   std::map<int, Tensor> cache;
   double sum = 0;
-  for (const auto& p : pairs) {
+  // Every R-th pair on each process, the sum over processes.
+  ProcessGroup& pg = process_group();
+  for (size_t k = static_cast<size_t>(pg.rank()); k < pairs.size(); k += size_t(pg.size())) {
+    const TrainingPair& p = pairs[k];
     for (int f : {p.i, p.j})
       if (!cache.count(f)) cache[f] = net.depth(load_frame(f).unsqueeze(0)).squeeze(0).squeeze(0);
     sum += pair_loss(cache[p.i], cache[p.j], p, lo, cameras).item();
   }
+  pg.all_reduce_sum(&sum, 1);
   net.train(was_training);
   return pairs.empty() ? 0.0 : sum / static_cast<double>(pairs.size());
 }

@@ -11,13 +11,9 @@
 #include "models/depth_net.h"
 #include "pipeline/training/camera_refinement.h"
 #include "pipeline/training/geometric_loss.h"
+#include "pipeline/training/training_pair.h"
 
 namespace cvd {
-
-struct TrainingPair {
-  int i = 0, j = 0;      // frame indices
-  PairDirection ij, ji;  // constants of both directions at the depth resolution
-};
 
 struct TrainingOptions {
   int epochs = 20;
@@ -49,6 +45,9 @@ struct TrainingResult {
   int skipped_steps = 0;             // steps skipped for a non-finite loss
   int resumed_from_epoch = 0;        // 0 = fresh start
   int steps = 0;                     // optimizer steps taken in this call
+  // Several processes (mpirun): bytes each process all-reduced per step (depths, their
+  // gradients and the gradient bucket; the batch-norm statistics are a few KB more).
+  size_t bytes_per_step = 0;
 };
 
 // `load_frame(k)` returns frame k as RGB in [0, 1], [3, H, W] f32; `pairs` index into frames.

@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "engine/error.h"
+#include "engine/process_group.h"
 #include "pipeline/eval/eval_run.h"
 #include "pipeline/run/run_pipeline.h"
 #include "tools/cli/command.h"
@@ -114,7 +115,8 @@ const CommandRegistration reg(20, [](CLI::App& app) {
     if (!st->o.gt.empty() && !std::filesystem::is_directory(st->o.gt))
       fail(ErrorCategory::invalid_argument, "--gt {}: ground-truth directory not found",
            st->o.gt.string());
-    ProgressBar bar(global_options().quiet);
+    // Under mpirun only rank 0 draws progress.
+    ProgressBar bar(global_options().quiet || process_group().rank() != 0);
     st->o.progress = [&](const RunProgress& p) { bar.update(p); };
     st->o.cancel = &g_interrupted;
     std::signal(SIGINT, on_interrupt);
@@ -130,6 +132,7 @@ const CommandRegistration reg(20, [](CLI::App& app) {
       throw;
     }
     bar.finish();
+    if (process_group().rank() != 0) return;  // rank 0 reports (and wrote the outputs)
     print_summary(r, st->o);
     if (!st->o.gt.empty()) evaluate_against_ground_truth(st->o);
   });

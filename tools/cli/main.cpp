@@ -7,9 +7,11 @@
 
 #include "engine/backend_info.h"
 #include "engine/error.h"
+#include "engine/process_group.h"
 #include "kernels/builtin_backends.h"
 #include "pipeline/run/dependency_versions.h"
 #include "tools/cli/command.h"
+#include "tools/distributed/mpi_process_group.h"
 
 namespace cvd::cli {
 
@@ -51,9 +53,52 @@ static int exit_code_for(ErrorCategory c) {
 
 }  // namespace cvd::cli
 
+int run_cli(int argc, char** argv);
+
+namespace {
+
+// Under mpirun: one rank's failure ends the whole job (the others would wait forever in a
+// collective); its message names the rank.
+int failed(int rc, const std::string& message) {
+  cvd::ProcessGroup& pg = cvd::process_group();
+  if (pg.size() == 1) {
+    std::fprintf(stderr, "cvd: %s\n", message.c_str());
+    return rc;
+  }
+  std::fprintf(stderr, "cvd: rank %d of %d: %s; ending every rank\n", pg.rank(), pg.size(),
+               message.c_str());
+  std::fflush(stderr);
+  pg.abort(rc);
+  return rc;  // not reached
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
   using namespace cvd::cli;
   cvd::register_builtin_backends();
+  if (cvd::launched_by_mpi()) {
+    if (!cvd::mpi_compiled()) {
+      std::fprintf(stderr,
+                   "cvd: error: started by an MPI launcher, but this cvd was built without MPI; "
+                   "each rank would run alone on the same output (rebuild with libopenmpi-dev "
+                   "installed, or run without mpirun)\n");
+      return kExitUnsupported;
+    }
+    try {
+      cvd::set_process_group(cvd::start_mpi_process_group());
+    } catch (const cvd::Error& e) {
+      std::fprintf(stderr, "cvd: error: %s\n", e.what());
+      return kExitUnsupported;
+    }
+  }
+  const int rc = run_cli(argc, argv);  // a failure on one of several ranks does not return
+  cvd::finish_mpi();
+  return rc;
+}
+
+int run_cli(int argc, char** argv) {
+  using namespace cvd::cli;
   CLI::App app{"cvd: consistent video depth (Luo et al. 2020) in native C++"};
   app.require_subcommand(1);
   // --version: the build's backends and the devices usable now (a missing GPU is not an error).
@@ -63,6 +108,9 @@ int main(int argc, char** argv) {
     v += "\nCUDA at run time: " + cvd::cuda_runtime_status();
     v += "\ndependencies:";
     for (const std::string& d : cvd::dependency_versions()) v += "\n  " + d;
+    v += "\nMPI: " + (cvd::mpi_compiled()
+                          ? cvd::mpi_library_version() + " (mpirun -np R cvd run ...)"
+                          : std::string("not compiled (-DCVD_MPI=ON)"));
     return v;
   });
   auto& g = global_options();
@@ -80,16 +128,12 @@ int main(int argc, char** argv) {
     int rc = app.exit(e);
     return rc == 0 ? 0 : kExitUsage;
   } catch (const cvd::Error& e) {
-    std::fprintf(stderr, "cvd: error: %s\n", e.what());
-    return exit_code_for(e.category());
+    return failed(exit_code_for(e.category()), std::string("error: ") + e.what());
   } catch (const std::filesystem::filesystem_error& e) {
     // A file system call without its own error handling: still an I/O error naming the path.
-    std::fprintf(stderr, "cvd: error: %s: %s\n", e.path1().string().c_str(),
-                 e.code().message().c_str());
-    return kExitIo;
+    return failed(kExitIo, "error: " + e.path1().string() + ": " + e.code().message());
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "cvd: internal error: %s\n", e.what());
-    return kExitFailure;
+    return failed(kExitFailure, std::string("internal error: ") + e.what());
   }
   return 0;
 }

@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "engine/error.h"
+#include "engine/process_group.h"
 #include "models/depth_net_architectures.h"
 #include "tools/cli/command.h"
 
@@ -128,7 +129,10 @@ void configure_logging() {
   const auto& g = global_options();
   spdlog::set_level(g.quiet ? spdlog::level::warn
                             : (g.verbose ? spdlog::level::debug : spdlog::level::info));
-  spdlog::set_pattern("%^[%l]%$ %v");
+  // Under mpirun every rank logs, each line prefixed with its rank.
+  const ProcessGroup& pg = process_group();
+  spdlog::set_pattern(pg.size() > 1 ? fmt::format("[rank {}] %^[%l]%$ %v", pg.rank())
+                                    : std::string("%^[%l]%$ %v"));
 }
 
 }  // namespace cvd::cli

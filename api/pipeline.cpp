@@ -34,6 +34,7 @@ RunOptions to_run_options(const PipelineOptions& p) {
   o.masks = p.masks;
   o.colmap_keyframes = p.colmap_keyframes;
   o.sparse_points = p.sparse_points;
+  o.pair_storage = p.pair_storage;
   o.flow = p.flow;
   o.dis_preset = p.dis_preset;
   o.flow_model = p.flow_model;

@@ -6,7 +6,7 @@
 #    report fails the test. About 14 min of build and 4 min of tests on 2 cores;
 #    CVD_SANITIZE_TESTS=0 skips it;
 #  * short libFuzzer runs of every reader (tests/fuzz/run_fuzzers.sh, clang) in <build-dir>-fuzz,
-#    CVD_FUZZ_SECONDS per target (default 20; 0 skips).
+#    CVD_FUZZ_SECONDS per target (default 10; 0 skips; tests/fuzz/run_fuzzers.sh runs longer).
 # Usage: bash scripts/test.sh [build-dir]   (default: build)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -31,12 +31,16 @@ if [ "${CVD_SANITIZE_TESTS:-1}" = "1" ]; then
     -DCVD_BUILD_SLOW_TESTS=OFF
   cmake --build "$build-asan" -j "$jobs"
   echo "test.sh: sanitizer build done after $(( $(date +%s) - start )) s"
+  # The bf16 numerics checks (a whole bf16 run against f32 runs, every convolution pass in bf16)
+  # ran in the Release suite above; under ASan they take ~6 of the suite's CPU minutes and
+  # exercise no memory handling the f32 cases do not, so they are left out here.
   ASAN_OPTIONS=detect_leaks=1:abort_on_error=0 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
     LSAN_OPTIONS=suppressions=$PWD/tests/sanitizer/lsan.supp \
-    ctest --test-dir "$build-asan" -j "$jobs" --timeout 3000
+    ctest --test-dir "$build-asan" -j "$jobs" --timeout 3000 \
+      -E '^(PrecisionClip\.Bf16RunStays|OnednnConv\.Bf16|OnednnDeconv\.Bf16)'
   echo "test.sh: sanitizer tests done after $(( $(date +%s) - start )) s"
 fi
-fuzz_seconds=${CVD_FUZZ_SECONDS:-20}
+fuzz_seconds=${CVD_FUZZ_SECONDS:-10}
 if [ "$fuzz_seconds" != "0" ]; then
   case $build in /*) fuzz_build=$build-fuzz ;; *) fuzz_build=$PWD/$build-fuzz ;; esac
   BUILD=$fuzz_build JOBS=$jobs bash tests/fuzz/run_fuzzers.sh "$fuzz_seconds"

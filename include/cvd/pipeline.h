@@ -61,6 +61,8 @@ struct PipelineOptions {
   std::string sparse_points = "flow";
 
   // Flow
+  /// --pairs: training pairs "memory", "stream" (read from OUT/cache/flow per batch) or "auto"
+  std::string pair_storage = "auto";
   std::string flow = "dis";           ///< --flow: dis | flownet2
   std::string dis_preset = "medium";  ///< --dis-preset: ultrafast | fast | medium
   std::string flow_model;             ///< --flow-model: FlowNet2 .cvdw

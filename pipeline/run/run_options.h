@@ -50,6 +50,9 @@ struct RunOptions {
   // point_triangulator on the given poses; required) or "auto" (colmap when it is on PATH, else
   // flow tracks).
   std::string sparse_points = "flow";
+  // Training pairs: "memory" (all loaded), "stream" (read from cache/flow per batch, prefetched;
+  // memory independent of the number of pairs), "auto" (stream above 1 GiB of pairs).
+  std::string pair_storage = "auto";
   std::filesystem::path masks;  // optional folder of masks (same names) passed to COLMAP
 
   // Flow

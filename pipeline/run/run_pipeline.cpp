@@ -29,6 +29,7 @@
 #include "pipeline/io/output_lock.h"
 #include "pipeline/io/pfm_io.h"
 #include "pipeline/poses/keyframe_selection.h"
+#include "pipeline/run/flow_pair_source.h"
 #include "pipeline/run/run_outputs.h"
 #include "pipeline/run/run_stages.h"
 #include "pipeline/training/network_start.h"
@@ -145,22 +146,6 @@ uint32_t cameras_crc32(const std::vector<FrameCamera>& cams) {
   return static_cast<uint32_t>(crc);
 }
 
-PairDirection make_direction(const FrameCamera& a, const FrameCamera& b, const cv::Mat& flow,
-                             const cv::Mat& mask) {
-  PairDirection d;
-  d.pose_i = a.pose;
-  d.pose_j = b.pose;
-  d.K_i = a.intrinsics;
-  d.K_j = b.intrinsics;
-  int64_t H = flow.rows, W = flow.cols;
-  d.flow = Tensor::empty({H, W, 2});
-  std::memcpy(d.flow.data<float>(), flow.ptr<float>(), d.flow.nbytes());
-  d.mask = Tensor::empty({H, W});
-  float* m = d.mask.data<float>();
-  for (int64_t k = 0; k < H * W; ++k) m[k] = mask.data[k] ? 1.0f : 0.0f;
-  return d;
-}
-
 }  // namespace
 
 RunResult run_pipeline(const RunOptions& o) {
@@ -175,6 +160,8 @@ RunResult run_pipeline(const RunOptions& o) {
   CVD_CHECK(o.sparse_points == "flow" || o.sparse_points == "colmap" || o.sparse_points == "auto",
             "sparse_points must be flow, colmap or auto, got '{}'", o.sparse_points);
   parse_keyframe_mode(o.colmap_keyframes, "colmap_keyframes");
+  CVD_CHECK(o.pair_storage == "auto" || o.pair_storage == "memory" || o.pair_storage == "stream",
+            "pair_storage must be auto, memory or stream, got '{}'", o.pair_storage);
   for (const std::string& f : o.depth_formats)
     CVD_CHECK(f == "pfm" || f == "png16" || f == "color" || f == "npy",
               "unknown depth format '{}' (expected pfm, png16, color or npy)", f);
@@ -226,20 +213,24 @@ RunResult run_pipeline(const RunOptions& o) {
   std::vector<FrameCamera> cams = poses.cameras;
   for (auto& c : cams) c.intrinsics = c.intrinsics.scaled_to(dsize.width, dsize.height);
 
-  // 4. Flow on sampled pairs
+  // 4. Flow on sampled pairs (streamed: left in the cache and read per training batch)
   t = Clock::now();
-  FlowStage flow = run_flow_stage(o, frames, poses, dsize, cache);
+  const bool stream = stream_pairs(o.pair_storage, hierarchical_pairs(n).size(), dsize);
+  FlowStage flow = run_flow_stage(o, frames, poses, dsize, cache, stream);
   timings["flow"] = since(t);
+  std::vector<cv::Mat> usable;
   if (!o.masks.empty()) {
     // User masks (0 = ignore, e.g. moving objects) leave the pixels they cover, and pixels whose
-    // flow lands on them, out of triangulation and out of the geometric loss.
+    // flow lands on them, out of triangulation and out of the geometric loss (applied as each
+    // pair is loaded; counted here in one pass).
     int with_masks = 0;
-    std::vector<cv::Mat> usable = load_user_masks(o.masks, frames.names, dsize, &with_masks);
+    usable = load_user_masks(o.masks, frames.names, dsize, &with_masks);
+    const FlowPairSource masked(flow, cams, usable);
     long long cleared = 0;
-    for (auto& p : flow.pairs) {
-      const cv::Mat &ui = usable[size_t(p.pair.first)], &uj = usable[size_t(p.pair.second)];
-      cleared += apply_user_masks(p.forward_mask, p.forward, ui, uj);
-      cleared += apply_user_masks(p.backward_mask, p.backward, uj, ui);
+    for (size_t k = 0; k < masked.size(); ++k) {
+      long long c = 0;
+      masked.flows(k, &c);
+      cleared += c;
     }
     info["user_masks"] = {{"folder", o.masks.string()},
                           {"frames_with_masks", with_masks},
@@ -257,9 +248,11 @@ RunResult run_pipeline(const RunOptions& o) {
     // Tracks through the consecutive-frame flows: one point per track, seen by every frame of it,
     // so the frames' sparse depths share one scale. Pair-by-pair triangulation only when no
     // track could be triangulated (e.g. a clip with consecutive pairs dropped).
+    const FlowPairSource masked(flow, cams, usable);
     std::vector<cv::Mat> next_flow(static_cast<size_t>(n)), next_mask(static_cast<size_t>(n));
-    for (const auto& p : flow.pairs)
-      if (p.pair.second == p.pair.first + 1) {
+    for (size_t k = 0; k < flow.pairs.size(); ++k)
+      if (flow.pairs[k].pair.second == flow.pairs[k].pair.first + 1) {
+        const FlowPairData p = masked.flows(k);  // consecutive pairs stay in memory
         next_flow[size_t(p.pair.first)] = p.forward;
         next_mask[size_t(p.pair.first)] = p.forward_mask;
       }
@@ -268,9 +261,11 @@ RunResult run_pipeline(const RunOptions& o) {
     spdlog::info("sparse points: {} of {} flow tracks triangulated", ts.kept, ts.tracks);
     if (ts.kept == 0) {
       int kept = 0;
-      for (const auto& p : flow.pairs)
+      for (size_t k = 0; k < flow.pairs.size(); ++k) {
+        const FlowPairData p = masked.flows(k);
         kept += triangulate_flow_points(cams[p.pair.first], cams[p.pair.second], p.pair.first,
                                         p.pair.second, p.forward, p.forward_mask, points);
+      }
       sparse_info = {{"method", "flow pairs (no track could be triangulated)"}, {"kept", kept}};
       spdlog::warn("sparse points: no flow track could be triangulated; {} points from pairs",
                    kept);
@@ -325,12 +320,15 @@ RunResult run_pipeline(const RunOptions& o) {
   timings["initial_depth"] = since(t);
 
   // 7. Test-time training
-  std::vector<TrainingPair> pairs;
-  for (const auto& p : flow.pairs) {
-    int i = p.pair.first, j = p.pair.second;
-    pairs.push_back({i, j, make_direction(cams[i], cams[j], p.forward, p.forward_mask),
-                     make_direction(cams[j], cams[i], p.backward, p.backward_mask)});
+  // The pairs with the final cameras: streamed from the cache, or all loaded now.
+  const FlowPairSource pair_loader(flow, cams, usable);
+  std::unique_ptr<PairSource> in_memory;
+  if (!stream) {
+    std::vector<TrainingPair> all;
+    for (size_t k = 0; k < pair_loader.size(); ++k) all.push_back(pair_loader.load(k));
+    in_memory = std::make_unique<PairsInMemory>(std::move(all));
   }
+  const PairSource& pairs = stream ? static_cast<const PairSource&>(pair_loader) : *in_memory;
   TrainingOptions to;
   to.epochs = o.epochs;
   to.batch_pairs = o.batch_pairs;
@@ -485,7 +483,9 @@ RunResult run_pipeline(const RunOptions& o) {
                              {"file", "sparse_depth.csv"}};
     if (!sparse_info.is_null()) info["sparse_points"]["triangulation"] = sparse_info;
   }
-  info["pairs"] = {{"kept", res.num_pairs}, {"dropped", flow.dropped}};
+  info["pairs"] = {{"kept", res.num_pairs},
+                   {"dropped", flow.dropped},
+                   {"storage", stream ? "streamed from cache/flow" : "memory"}};
   info["processes"] = {{"count", pg.size()}, {"group", pg.name()}};
   if (pg.size() > 1) info["processes"]["allreduce_bytes_per_step"] = tr.bytes_per_step;
   info["training"] = {{"epochs", o.epochs},

@@ -414,8 +414,33 @@ cv::Mat resize_mask(const cv::Mat& m, cv::Size size) {
 
 }  // namespace
 
+namespace {
+
+void read_cached_flows(const fs::path& dir, const std::string& stem, FlowPairData& d) {
+  d.forward = read_flo(dir / (stem + ".fwd.flo"));
+  d.backward = read_flo(dir / (stem + ".bwd.flo"));
+  for (auto [suffix, mat] :
+       {std::pair{".fwd_mask.png", &d.forward_mask}, {".bwd_mask.png", &d.backward_mask}}) {
+    const fs::path mp = dir / (stem + suffix);
+    *mat = cv::imread(mp.string(), cv::IMREAD_GRAYSCALE);
+    if (mat->empty())
+      fail(ErrorCategory::io, "{}: cached flow mask missing or unreadable", mp.string());
+  }
+}
+
+}  // namespace
+
+FlowPairData FlowStage::load(size_t k) const {
+  CVD_CHECK(k < pairs.size(), "flow pair {} of {}", k, pairs.size());
+  const FlowPairData& p = pairs[k];
+  if (!p.forward.empty()) return p;
+  FlowPairData d = p;
+  read_cached_flows(dir, p.stem, d);
+  return d;
+}
+
 FlowStage run_flow_stage(const RunOptions& o, const FramesStage& f, const PosesStage& poses,
-                         cv::Size depth_size, const fs::path& cache) {
+                         cv::Size depth_size, const fs::path& cache, bool stream) {
   auto t0 = std::chrono::steady_clock::now();
   FlowStage st;
   fs::path dir = cache / "flow";
@@ -450,23 +475,21 @@ FlowStage run_flow_stage(const RunOptions& o, const FramesStage& f, const PosesS
   int done = 0;
   std::map<int, ImageKeypoints> keypoint_cache;
   // One pair: from the cache when it holds it, else computed and cached.
+  // Streamed: only the consecutive pairs (the flow tracks' input: one per frame) keep their
+  // flows in memory; the others are left in the cache until training reads them.
   auto run_pair = [&](const FramePair& p) {
+    const bool keep_flows = !stream || p.second == p.first + 1;
     std::string stem = fmt::format("{}__{}", f.names[p.first], f.names[p.second]);
     fs::path meta = dir / (stem + ".json");
     FlowPairData d;
     d.pair = p;
+    d.stem = stem;
     json m = read_json_if(meta);
     if (!m.is_null() && m.value("key", json()) == key) {
       d.forward_valid = m["forward_valid"];
       d.backward_valid = m["backward_valid"];
-      if (m["kept"].get<bool>()) {
-        d.forward = read_flo(dir / (stem + ".fwd.flo"));
-        d.backward = read_flo(dir / (stem + ".bwd.flo"));
-        d.forward_mask =
-            cv::imread((dir / (stem + ".fwd_mask.png")).string(), cv::IMREAD_GRAYSCALE);
-        d.backward_mask =
-            cv::imread((dir / (stem + ".bwd_mask.png")).string(), cv::IMREAD_GRAYSCALE);
-      }
+      d.kept = m["kept"].get<bool>();
+      if (d.kept && keep_flows) read_cached_flows(dir, stem, d);
     } else {
       // Keypoints are detected once per frame and reused by every pair that frame is in.
       auto keypoints = [&](int k, const cv::Mat& img) -> const ImageKeypoints& {
@@ -480,7 +503,7 @@ FlowStage run_flow_stage(const RunOptions& o, const FramesStage& f, const PosesS
                                            &keypoints(p.second, img_j));
       d.forward_valid = r.forward_valid_fraction;
       d.backward_valid = r.backward_valid_fraction;
-      bool kept = r.both_directions_keep(o.min_valid_fraction);
+      const bool kept = d.kept = r.both_directions_keep(o.min_valid_fraction);
       if (kept) {
         d.forward = resize_flow(r.forward, depth_size);
         d.backward = resize_flow(r.backward, depth_size);
@@ -503,6 +526,7 @@ FlowStage run_flow_stage(const RunOptions& o, const FramesStage& f, const PosesS
                  {"backward_valid", d.backward_valid},
                  {"homography_fallback", r.homography.reason}};
       write_text_file(meta, mj.dump());
+      if (!keep_flows) d.forward = d.backward = d.forward_mask = d.backward_mask = cv::Mat();
     }
     report(o, "flow", ++done, static_cast<int>(pairs.size()), stem);
     return d;
@@ -520,11 +544,13 @@ FlowStage run_flow_stage(const RunOptions& o, const FramesStage& f, const PosesS
       if (static_cast<int>(k % size_t(pg.size())) != pg.rank()) results[k] = run_pair(pairs[k]);
   }
   for (FlowPairData& d : results) {
-    if (!d.forward.empty())
+    if (d.kept)
       st.pairs.push_back(std::move(d));
     else
       ++st.dropped;
   }
+  st.dir = dir;
+  st.streamed = stream;
   if (st.pairs.empty())
     fail(ErrorCategory::invalid_argument,
          "flow: no frame pair kept {:.0f}% consistent pixels in both directions ({} pairs tried); "

@@ -45,17 +45,25 @@ ColmapOptions colmap_options(const RunOptions& o, const std::optional<Intrinsics
 
 struct FlowPairData {
   FramePair pair;
+  std::string stem;                     // cache/flow/<stem>.fwd.flo, ...
   cv::Mat forward, backward;            // CV_32FC2 at the depth resolution
   cv::Mat forward_mask, backward_mask;  // CV_8U (255 valid)
   double forward_valid = 0, backward_valid = 0;
+  bool kept = false;  // both directions kept enough consistent pixels
 };
 struct FlowStage {
-  std::vector<FlowPairData> pairs;  // kept pairs
+  // Kept pairs. Streamed: the flows of pairs of non-consecutive frames are left in the cache
+  // (empty here), so memory grows with the frames, not with the pairs.
+  std::vector<FlowPairData> pairs;
+  std::filesystem::path dir;  // cache/flow
+  bool streamed = false;
   int dropped = 0;
   double seconds = 0;
+  // Pair k with its flows (read from the cache when streamed). Safe to call from another thread.
+  FlowPairData load(size_t k) const;
 };
 FlowStage run_flow_stage(const RunOptions& o, const FramesStage& frames, const PosesStage& poses,
-                         cv::Size depth_size, const std::filesystem::path& cache);
+                         cv::Size depth_size, const std::filesystem::path& cache, bool stream);
 
 // RGB in [0, 1], [3, H, W] f32, at `size`.
 Tensor frame_tensor(const cv::Mat& bgr, cv::Size size);

@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <future>
 #include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -173,7 +174,18 @@ void maybe_kill_this_rank(int step) {
 
 TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& load_frame,
                                const std::vector<TrainingPair>& pairs, const TrainingOptions& o) {
-  CVD_CHECK(!pairs.empty(), "test-time training needs at least one frame pair");
+  return train_test_time(net, load_frame, PairsInMemory(pairs), o);
+}
+
+double evaluate_geometric_loss(DepthNet& net, const std::function<Tensor(int)>& load_frame,
+                               const std::vector<TrainingPair>& pairs, double lambda_disparity,
+                               const CameraRefinement* cameras) {
+  return evaluate_geometric_loss(net, load_frame, PairsInMemory(pairs), lambda_disparity, cameras);
+}
+
+TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& load_frame,
+                               const PairSource& pairs, const TrainingOptions& o) {
+  CVD_CHECK(pairs.size() > 0, "test-time training needs at least one frame pair");
   CVD_CHECK(o.batch_pairs >= 1 && o.epochs >= 0 && o.lr > 0, "bad training options");
   AdamOptions ao;
   ao.lr = o.lr;
@@ -221,11 +233,20 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
     std::shuffle(order.begin(), order.end(), rng.engine());
     double sum = 0;
     int counted = 0;
+    // The pairs of step s, loaded on a background thread one step ahead.
+    auto load_batch = [&pairs, &order, bp = size_t(o.batch_pairs)](size_t s) {
+      std::vector<TrainingPair> b;
+      for (size_t k = s * bp; k < std::min(order.size(), (s + 1) * bp); ++k)
+        b.push_back(pairs.load(order[k]));
+      return b;
+    };
+    std::future<std::vector<TrainingPair>> next =
+        std::async(std::launch::async, load_batch, size_t(0));
     for (int s = 0; s < steps_per_epoch; ++s) {
+      const std::vector<TrainingPair> loaded = next.get();
+      if (s + 1 < steps_per_epoch) next = std::async(std::launch::async, load_batch, size_t(s + 1));
       std::vector<const TrainingPair*> batch;
-      for (size_t k = s * o.batch_pairs; k < std::min(order.size(), size_t(s + 1) * o.batch_pairs);
-           ++k)
-        batch.push_back(&pairs[order[k]]);
+      for (const TrainingPair& p : loaded) batch.push_back(&p);
       adam.zero_grad();
       maybe_kill_this_rank(epoch * steps_per_epoch + s + 1);
       const bool inject_nan = nan_fault.hits(epoch * steps_per_epoch + s + 1);
@@ -275,7 +296,7 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
 }
 
 double evaluate_geometric_loss(DepthNet& net, const std::function<Tensor(int)>& load_frame,
-                               const std::vector<TrainingPair>& pairs, double lambda_disparity,
+                               const PairSource& pairs, double lambda_disparity,
                                const CameraRefinement* cameras) {
   NoGradGuard ng;
   bool was_training = net.is_training();
@@ -287,14 +308,14 @@ double evaluate_geometric_loss(DepthNet& net, const std::function<Tensor(int)>& 
   // Every R-th pair on each process, the sum over processes.
   ProcessGroup& pg = process_group();
   for (size_t k = static_cast<size_t>(pg.rank()); k < pairs.size(); k += size_t(pg.size())) {
-    const TrainingPair& p = pairs[k];
+    const TrainingPair p = pairs.load(k);
     for (int f : {p.i, p.j})
       if (!cache.count(f)) cache[f] = net.depth(load_frame(f).unsqueeze(0)).squeeze(0).squeeze(0);
     sum += pair_loss(cache[p.i], cache[p.j], p, lo, cameras).item();
   }
   pg.all_reduce_sum(&sum, 1);
   net.train(was_training);
-  return pairs.empty() ? 0.0 : sum / static_cast<double>(pairs.size());
+  return pairs.size() == 0 ? 0.0 : sum / static_cast<double>(pairs.size());
 }
 
 }  // namespace cvd

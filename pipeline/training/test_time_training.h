@@ -11,6 +11,7 @@
 #include "models/depth_net.h"
 #include "pipeline/training/camera_refinement.h"
 #include "pipeline/training/geometric_loss.h"
+#include "pipeline/training/pair_source.h"
 #include "pipeline/training/training_pair.h"
 
 namespace cvd {
@@ -51,12 +52,18 @@ struct TrainingResult {
 };
 
 // `load_frame(k)` returns frame k as RGB in [0, 1], [3, H, W] f32; `pairs` index into frames.
+// The next batch's pairs are loaded on a background thread while a step runs.
+TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& load_frame,
+                               const PairSource& pairs, const TrainingOptions& options);
 TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& load_frame,
                                const std::vector<TrainingPair>& pairs,
                                const TrainingOptions& options);
 
 // Mean geometric loss over all pairs with the network as it is (eval mode, no gradients).
 // With `cameras`, the loss of the refined cameras.
+double evaluate_geometric_loss(DepthNet& net, const std::function<Tensor(int)>& load_frame,
+                               const PairSource& pairs, double lambda_disparity,
+                               const CameraRefinement* cameras = nullptr);
 double evaluate_geometric_loss(DepthNet& net, const std::function<Tensor(int)>& load_frame,
                                const std::vector<TrainingPair>& pairs, double lambda_disparity,
                                const CameraRefinement* cameras = nullptr);

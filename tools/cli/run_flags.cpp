@@ -56,6 +56,10 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s) {
                 "COLMAP's point_triangulator on the given poses (colmap), or colmap when it is on "
                 "PATH (auto)")
       ->check(CLI::IsMember({"auto", "colmap", "flow"}));
+  c->add_option("--pairs", o.pair_storage,
+                "Training pairs: all in memory, streamed from OUT/cache/flow per batch (memory "
+                "independent of the number of pairs; prefetched), or auto (stream above 1 GiB)")
+      ->check(CLI::IsMember({"auto", "memory", "stream"}));
   c->add_option("--colmap-features", o.colmap_max_features,
                 "Max SIFT features per frame for COLMAP");
   c->add_option("--masks", o.masks,

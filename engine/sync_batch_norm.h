@@ -1,8 +1,9 @@
 // Synchronised batch norm (issue 21): training-mode batch norm whose statistics are taken over
-// the inputs of every process of the job (engine/process_group.h), composed of engine ops so
-// that autograd differentiates through the all-reduces. Two passes (the mean, then the centred
-// sum of squares), as exact as the single-process kernel; PyTorch's SyncBatchNorm semantics:
-// the running variance is updated with the unbiased variance over all processes' values.
+// the inputs of every process of the job (engine/process_group.h). Two-pass statistics (the
+// mean, then the centred sum of squares: as exact as the single-process kernel), the fused
+// batch-norm kernel for the normalisation, and one recorded backward node with its own
+// all-reduce; PyTorch's SyncBatchNorm semantics: the running variance is updated with the
+// unbiased variance over all processes' values.
 #pragma once
 #include "engine/kernel_params.h"
 #include "engine/tensor.h"

@@ -6,6 +6,7 @@
 #include "engine/error.h"
 #include "pipeline/io/atomic_file.h"
 #include "pipeline/poses/colmap_command.h"
+#include "pipeline/poses/colmap_steps.h"
 
 namespace cvd::colmap {
 
@@ -32,6 +33,19 @@ void match_pairs(const fs::path& exe, const fs::path& work_dir, const ColmapOpti
                                          options.guided_matching ? "1" : "0"};
   require_success(run_logged(exe, "matches_importer", args, result), "matches_importer",
                   result.log_file);
+}
+
+void match_clip(const fs::path& exe, const fs::path& work_dir, const ColmapOptions& options,
+                const std::vector<std::string>& internal_names, const KeyframeSelection& keys,
+                ColmapResult& result) {
+  if (keys.all_frames || options.matcher != ColmapMatcher::sequential) {
+    match_features(exe, work_dir, options, result);
+    return;
+  }
+  const auto pairs = keyframe_match_pairs(int(internal_names.size()), keys.keyframes,
+                                          options.sequential_overlap, options.keyframes);
+  result.matched_pairs = int(pairs.size());
+  match_pairs(exe, work_dir, options, internal_names, pairs, result);
 }
 
 fs::path write_image_list(const fs::path& work_dir, const std::vector<std::string>& internal_names,

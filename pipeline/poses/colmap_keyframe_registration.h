@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "pipeline/poses/colmap_runner.h"
+#include "pipeline/poses/keyframe_selection.h"
 
 namespace cvd::colmap {
 
@@ -17,6 +18,13 @@ namespace cvd::colmap {
 void match_pairs(const std::filesystem::path& exe, const std::filesystem::path& work_dir,
                  const ColmapOptions& options, const std::vector<std::string>& internal_names,
                  const std::vector<std::pair<int, int>>& pairs, ColmapResult& result);
+
+// The matching step of a clip: with keyframes and the sequential matcher, the keyframe pair list
+// (keyframe_match_pairs: bounded cost on long clips) through matches_importer; otherwise the
+// matcher the options name. `internal_names` are the n frames' names inside COLMAP.
+void match_clip(const std::filesystem::path& exe, const std::filesystem::path& work_dir,
+                const ColmapOptions& options, const std::vector<std::string>& internal_names,
+                const KeyframeSelection& keys, ColmapResult& result);
 
 // Writes the mapper's --image_list_path file (<work_dir>/colmap_keyframes.txt) and returns it.
 std::filesystem::path write_image_list(const std::filesystem::path& work_dir,

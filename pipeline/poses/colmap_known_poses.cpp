@@ -45,15 +45,8 @@ ColmapModel triangulate_known_poses(const std::vector<ColmapFrame>& frames,
   std::vector<std::string> internal(n);
   for (size_t k = 0; k < n; ++k) internal[k] = colmap::internal_name(k);
   const KeyframeSelection keys = colmap::choose_keyframes(frames, options, result);
-  if (!keys.all_frames && options.matcher == ColmapMatcher::sequential) {
-    // Long clips: the keyframe pair list bounds the matching cost (no mapper runs here).
-    auto pairs =
-        keyframe_match_pairs(int(n), keys.keyframes, options.sequential_overlap, options.keyframes);
-    result.matched_pairs = int(pairs.size());
-    colmap::match_pairs(exe, work_dir, options, internal, pairs, result);
-  } else {
-    colmap::match_features(exe, work_dir, options, result);
-  }
+  // Long clips: the keyframe pair list bounds the matching cost (no mapper runs here).
+  colmap::match_clip(exe, work_dir, options, internal, keys, result);
 
   // The given cameras as a COLMAP model at COLMAP's resolution, one camera of the model the
   // extractor used, image ids as the database has them.

@@ -33,7 +33,6 @@ using colmap::CommandRun;
 using colmap::extract_features;
 using colmap::FrameSet;
 using colmap::internal_name;
-using colmap::match_features;
 using colmap::require_success;
 using colmap::run_logged;
 using colmap::seconds_since;
@@ -428,14 +427,7 @@ ColmapResult run_colmap(const std::vector<ColmapFrame>& frames,
     mapper_extra = {"--image_list_path",
                     colmap::write_image_list(work_dir, internal, keys.keyframes).string()};
   }
-  if (!keys.all_frames && options.matcher == ColmapMatcher::sequential) {
-    auto pairs =
-        keyframe_match_pairs(int(n), keys.keyframes, options.sequential_overlap, options.keyframes);
-    result.matched_pairs = int(pairs.size());
-    colmap::match_pairs(exe, work_dir, options, internal, pairs, result);
-  } else {
-    match_features(exe, work_dir, options, result);
-  }
+  colmap::match_clip(exe, work_dir, options, internal, keys, result);
   const size_t mapped = keys.all_frames ? n : keys.keyframes.size();
   MapperAttempt best = run_mapper(exe, work_dir, options, mapped, set.width, images,
                                   required_of(mapped), mapper_extra, result);

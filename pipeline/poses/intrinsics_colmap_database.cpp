@@ -79,29 +79,38 @@ int focal_params_of_model(int64_t model) {
   }
 }
 
+// A COLMAP database opened read-write or read-only (waiting up to 10 s on a lock), closed when
+// it goes out of scope; a missing libsqlite3 or a failed open is an Error naming the file.
+struct OpenDatabase {
+  const Sqlite& s = sqlite();
+  Sqlite::Db* db = nullptr;
+  OpenDatabase(const std::filesystem::path& path, bool writable) {
+    if (!s.loaded)
+      fail(ErrorCategory::unsupported,
+           "cannot {} {}: libsqlite3.so.0 (a dependency of COLMAP) could not be loaded",
+           writable ? "edit" : "read", path.string());
+    if (s.open_v2(path.c_str(), &db, writable ? Sqlite::kOpenReadWrite : Sqlite::kOpenReadOnly,
+                  nullptr) != Sqlite::kOk) {
+      std::string msg = db ? s.errmsg(db) : "out of memory";
+      if (db) s.close(db);
+      fail(ErrorCategory::io, "cannot open COLMAP database {}: {}", path.string(), msg);
+    }
+    s.busy_timeout(db, 10000);
+  }
+  ~OpenDatabase() { s.close(db); }
+  OpenDatabase(const OpenDatabase&) = delete;
+  OpenDatabase& operator=(const OpenDatabase&) = delete;
+};
+
 }  // namespace
 
 bool colmap_database_editable() { return sqlite().loaded; }
 
 int set_colmap_database_focal(const std::filesystem::path& database, double focal_px) {
   CVD_CHECK(focal_px > 0, "set_colmap_database_focal: focal must be positive, got {}", focal_px);
-  const Sqlite& s = sqlite();
-  if (!s.loaded)
-    fail(ErrorCategory::unsupported,
-         "cannot edit {}: libsqlite3.so.0 (a dependency of COLMAP) could not be loaded",
-         database.string());
-  Sqlite::Db* db = nullptr;
-  if (s.open_v2(database.c_str(), &db, Sqlite::kOpenReadWrite, nullptr) != Sqlite::kOk) {
-    std::string msg = db ? s.errmsg(db) : "out of memory";
-    if (db) s.close(db);
-    fail(ErrorCategory::io, "cannot open COLMAP database {}: {}", database.string(), msg);
-  }
-  s.busy_timeout(db, 10000);
-  struct Closer {
-    const Sqlite& s;
-    Sqlite::Db* db;
-    ~Closer() { s.close(db); }
-  } closer{s, db};
+  const OpenDatabase open(database, true);
+  const Sqlite& s = open.s;
+  Sqlite::Db* db = open.db;
   auto error = [&](const char* what) {
     fail(ErrorCategory::io, "COLMAP database {}: {} failed: {}", database.string(), what,
          s.errmsg(db));
@@ -156,23 +165,9 @@ int set_colmap_database_focal(const std::filesystem::path& database, double foca
 }
 
 std::map<std::string, int> colmap_database_image_ids(const std::filesystem::path& database) {
-  const Sqlite& s = sqlite();
-  if (!s.loaded)
-    fail(ErrorCategory::unsupported,
-         "cannot read {}: libsqlite3.so.0 (a dependency of COLMAP) could not be loaded",
-         database.string());
-  Sqlite::Db* db = nullptr;
-  if (s.open_v2(database.c_str(), &db, Sqlite::kOpenReadOnly, nullptr) != Sqlite::kOk) {
-    std::string msg = db ? s.errmsg(db) : "out of memory";
-    if (db) s.close(db);
-    fail(ErrorCategory::io, "cannot open COLMAP database {}: {}", database.string(), msg);
-  }
-  s.busy_timeout(db, 10000);
-  struct Closer {
-    const Sqlite& s;
-    Sqlite::Db* db;
-    ~Closer() { s.close(db); }
-  } closer{s, db};
+  const OpenDatabase open(database, false);
+  const Sqlite& s = open.s;
+  Sqlite::Db* db = open.db;
   std::map<std::string, int> ids;
   Sqlite::Stmt* st = nullptr;
   if (s.prepare_v2(db, "SELECT image_id, name FROM images", -1, &st, nullptr) != Sqlite::kOk)

@@ -162,8 +162,9 @@ std::vector<std::pair<int, int>> keyframe_match_pairs(int num_frames,
     if (a == b || a < 0 || b < 0 || a >= num_frames || b >= num_frames) return;
     pairs.insert({std::min(a, b), std::max(a, b)});
   };
+  const int overlap = std::min(sequential_overlap, std::max(1, o.frame_overlap));
   for (int i = 0; i < num_frames; ++i)
-    for (int d = 1; d <= sequential_overlap; ++d) add(i, i + d);
+    for (int d = 1; d <= overlap; ++d) add(i, i + d);
   const int K = static_cast<int>(keyframes.size());
   for (int a = 0; a < K; ++a) {
     for (int b = a + 1; b <= std::min(K - 1, a + o.keyframe_overlap); ++b)

@@ -299,6 +299,7 @@ RunResult run_pipeline(const RunOptions& o) {
       if (!start_warnings.empty()) calib["warnings"] = start_warnings;
     }
     if (pg.size() > 1) {
+      pg.barrier();  // the others wait here (without spinning) while rank 0 warms up
       broadcast_module(*net, 0);
       calib = json::parse(broadcast_string(calib.dump(), 0));
     }

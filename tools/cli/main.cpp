@@ -93,6 +93,8 @@ int main(int argc, char** argv) {
     }
   }
   const int rc = run_cli(argc, argv);  // a failure on one of several ranks does not return
+  // Ranks that finished wait (without spinning) for rank 0's outputs before MPI_Finalize.
+  if (cvd::process_group().size() > 1) cvd::process_group().barrier();
   cvd::finish_mpi();
   return rc;
 }

@@ -37,7 +37,8 @@ struct KeyframeOptions {
   int keyframe_overlap = 6;
   // Every frame is matched with its next min(`frame_overlap`, the matcher's overlap) frames and
   // with the keyframes before and after it (registration finds its 3-D points through those).
-  // 3 instead of COLMAP's 10 cut the matching of 7-Scenes frames 0-149 from 207 s to [see README].
+  // 3 instead of the matcher's 10 cut the matching of 7-Scenes frames 0-149 (24 keyframes) from
+  // 1,557 pairs / 207 s to 694 / 89 s with the same ATE (README "Poses on a longer clip").
   int frame_overlap = 3;
 };
 

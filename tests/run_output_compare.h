@@ -5,10 +5,18 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
 
 #include "pipeline/io/pfm_io.h"
 
 namespace cvd::test {
+
+// A run's JSON output (run.json, metrics.json, intrinsics.json).
+inline nlohmann::json read_json(const std::filesystem::path& p) {
+  std::ifstream f(p);
+  return nlohmann::json::parse(f);
+}
 
 // Largest |a - b| / max(|b|, 1e-6) over all pixels of the depth PFMs of two runs; `files` is set
 // to the number of maps compared.

@@ -22,11 +22,6 @@ namespace {
 namespace fs = std::filesystem;
 using json = nlohmann::json;
 
-json read_json(const fs::path& p) {
-  std::ifstream f(p);
-  return json::parse(f);
-}
-
 class MpiRun : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {

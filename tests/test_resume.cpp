@@ -40,11 +40,6 @@ std::string q(const fs::path& p) {
   return s;
 }
 
-json read_json(const fs::path& p) {
-  std::ifstream f(p);
-  return json::parse(f);
-}
-
 class TinyClip : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {

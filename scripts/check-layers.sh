@@ -6,7 +6,7 @@
 #
 #   scripts/check-layers.sh SOURCE_DIR [libcvd_engine.a libcvd_kernels_reference.a
 #       libcvd_kernels_cpu.a libcvd_kernels_cuda.a libcvd_kernels.a libcvd_models.a
-#       libcvd_pipeline.a libcvd_scene.a libcvd_convert.a libcvd_mpi.a]
+#       libcvd_pipeline.a libcvd_scene.a libcvd_convert.a libcvd_mpi.a libcvd_viewer.a]
 # (ctest runs it as check_layers with the libraries of the build.)
 set -euo pipefail
 root=$1
@@ -25,8 +25,9 @@ declare -A allowed=(
   [scene]="engine pipeline scene"
   [tools/convert]="engine models tools/convert"
   [tools/distributed]="engine tools/distributed"
+  [tools/viewer]="engine pipeline tools/viewer"
   [api]="api engine kernels models pipeline"
-  [tools/cli]="engine kernels models pipeline scene tools/convert tools/distributed tools/cli"
+  [tools/cli]="engine kernels models pipeline scene tools/convert tools/distributed tools/viewer tools/cli"
 )
 
 status=0
@@ -64,12 +65,12 @@ for layer in "${!allowed[@]}"; do
 done
 
 if [ $# -gt 0 ]; then
-  if [ $# -ne 10 ]; then
-    echo "check-layers: expected 10 libraries, got $#" >&2
+  if [ $# -ne 11 ]; then
+    echo "check-layers: expected 11 libraries, got $#" >&2
     exit 2
   fi
   names=(engine kernels/reference kernels/cpu kernels/cuda kernels models pipeline scene tools/convert
-    tools/distributed)
+    tools/distributed tools/viewer)
   libs=("$@")
   declare -A lib
   for i in "${!names[@]}"; do lib[${names[$i]}]=${libs[$i]}; done
@@ -85,6 +86,7 @@ if [ $# -gt 0 ]; then
     [scene]="engine kernels/reference kernels/cpu kernels/cuda kernels models pipeline"
     [tools/convert]="engine models"
     [tools/distributed]="engine"
+    [tools/viewer]="engine kernels/reference kernels/cpu kernels/cuda kernels models pipeline"
   )
   tmp=$(mktemp -d)
   trap 'rm -rf "$tmp"' EXIT

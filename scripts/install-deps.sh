@@ -19,6 +19,11 @@ pkgs=(
   # MPI (issue 21): data-parallel training and sharded flow over mpirun; optional at build time.
   libopenmpi-dev openmpi-bin
 )
+# The viewer's script is bundled with three.js at build time (tools/viewer/web, npm packages pinned
+# in its package-lock.json); a machine that already has node and npm keeps its own.
+if ! command -v npm >/dev/null || ! command -v node >/dev/null; then
+  pkgs+=(nodejs npm)
+fi
 if [ "${CVD_WITH_PYTHON:-0}" = "1" ]; then
   pkgs+=(python3-torch python3-torchvision python3-onnx python3-numpy)
 fi
@@ -28,10 +33,17 @@ for p in "${pkgs[@]}"; do
 done
 if [ "${#missing[@]}" -eq 0 ]; then
   echo "install-deps.sh: all ${#pkgs[@]} packages already installed"
-  exit 0
+else
+  echo "install-deps.sh: installing ${missing[*]}"
+  export DEBIAN_FRONTEND=noninteractive
+  apt-get update -qq
+  apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
 fi
-echo "install-deps.sh: installing ${missing[*]}"
-export DEBIAN_FRONTEND=noninteractive
-apt-get update -qq
-apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+# The viewer's npm packages, exactly as locked (again only when the lock file changed).
+web="$(cd "$(dirname "$0")/.." && pwd)/tools/viewer/web"
+if ! cmp -s "$web/package-lock.json" "$web/node_modules/.cvd-installed-lock.json" 2>/dev/null; then
+  echo "install-deps.sh: npm ci in tools/viewer/web (three.js, esbuild, playwright-core)"
+  npm ci --prefix "$web" --no-audit --no-fund --loglevel=error
+  cp "$web/package-lock.json" "$web/node_modules/.cvd-installed-lock.json"
+fi
 echo "install-deps.sh: done"

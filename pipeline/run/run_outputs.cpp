@@ -116,9 +116,10 @@ void write_cameras(const fs::path& out, const RunOutputs& r) {
   if (!r.cameras.empty()) write_intrinsics_json(out / "intrinsics.json", r.cameras[0].intrinsics);
 }
 
-void write_point_cloud(const fs::path& file, const RunOutputs& r, int pixel_step, int frame_step) {
-  std::string body;
-  size_t n = 0;
+std::vector<FusedPoint> fuse_point_cloud(const RunOutputs& r, int pixel_step, int frame_step) {
+  CVD_CHECK(pixel_step > 0 && frame_step > 0, "fuse_point_cloud: steps must be positive ({}, {})",
+            pixel_step, frame_step);
+  std::vector<FusedPoint> points;
   for (size_t k = 0; k < r.names.size(); k += frame_step) {
     const FrameCamera& c = r.cameras[k];
     if (!c.registered) continue;
@@ -129,19 +130,25 @@ void write_point_cloud(const fs::path& file, const RunOutputs& r, int pixel_step
         float z = d.at<float>(y, x);
         if (!(z > 0) || !std::isfinite(z)) continue;
         Eigen::Vector3d pc((x - K.cx) / K.fx * z, (y - K.cy) / K.fy * z, z);
-        Eigen::Vector3d pw = c.pose.transform(pc);
-        cv::Vec3b col =
+        cv::Vec3b bgr =
             r.frames_bgr.empty() ? cv::Vec3b(200, 200, 200) : r.frames_bgr[k].at<cv::Vec3b>(y, x);
-        body += fmt::format("{:.5f} {:.5f} {:.5f} {} {} {}\n", pw.x(), pw.y(), pw.z(), col[2],
-                            col[1], col[0]);
-        ++n;
+        points.push_back({c.pose.transform(pc), cv::Vec3b(bgr[2], bgr[1], bgr[0])});
       }
   }
+  return points;
+}
+
+void write_point_cloud(const fs::path& file, const RunOutputs& r, int pixel_step, int frame_step) {
+  std::string body;
+  std::vector<FusedPoint> points = fuse_point_cloud(r, pixel_step, frame_step);
+  for (const FusedPoint& p : points)
+    body += fmt::format("{:.5f} {:.5f} {:.5f} {} {} {}\n", p.position.x(), p.position.y(),
+                        p.position.z(), p.rgb[0], p.rgb[1], p.rgb[2]);
   std::string header = fmt::format(
       "ply\nformat ascii 1.0\ncomment cvd fused point cloud (every {} px of every {}th frame)\n"
       "element vertex {}\nproperty float x\nproperty float y\nproperty float z\n"
       "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n",
-      pixel_step, frame_step, n);
+      pixel_step, frame_step, points.size());
   write_text_file(file, header + body);
 }
 
@@ -177,7 +184,7 @@ const std::vector<std::string>& run_output_names() {
       "depth",     "depth_png16",      "depth_color",      "depth_initial",
       "poses.txt", "colmap",           "intrinsics.json",  "points.ply",
       "depth.mp4", "side_by_side.mp4", "sparse_depth.csv", "run.json",
-      "depth.npy", "frames.txt"};
+      "depth.npy", "frames.txt",       "viewer.html"};
   return names;
 }
 

@@ -33,6 +33,14 @@ struct RunOutputs {
 void write_depth_maps(const std::filesystem::path& out, const RunOutputs& r,
                       const std::vector<std::string>& formats = {"pfm", "png16", "color"});
 void write_cameras(const std::filesystem::path& out, const RunOutputs& r);
+// The depth maps fused into one world-space cloud: every `pixel_step`-th pixel of every
+// `frame_step`-th registered frame with a valid depth, coloured by its frame (grey without frames).
+struct FusedPoint {
+  Eigen::Vector3d position;
+  cv::Vec3b rgb;
+};
+std::vector<FusedPoint> fuse_point_cloud(const RunOutputs& r, int pixel_step = 4,
+                                         int frame_step = 2);
 void write_point_cloud(const std::filesystem::path& file, const RunOutputs& r, int pixel_step = 4,
                        int frame_step = 2);
 void write_videos(const std::filesystem::path& out, const RunOutputs& r);

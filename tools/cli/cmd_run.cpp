@@ -16,6 +16,7 @@
 #include "tools/cli/command.h"
 #include "tools/cli/progress_bar.h"
 #include "tools/cli/run_flags.h"
+#include "tools/viewer/viewer_page.h"
 
 namespace cvd::cli {
 namespace {
@@ -23,6 +24,7 @@ namespace {
 struct RunCommand {
   RunOptions o;
   RunFlagStrings s;
+  bool viewer = false;
 };
 
 void print_summary(const RunResult& r, const RunOptions& o) {
@@ -109,9 +111,15 @@ const CommandRegistration reg(20, [](CLI::App& app) {
   c->add_option("-o,--out", st->o.out, "Output directory (a rerun resumes from its cache)")
       ->required();
   add_pipeline_flags(c, st->o, st->s);
+  c->add_flag("--viewer", st->viewer,
+              "Also write OUT/viewer.html (as `cvd view OUT`: point cloud, cameras, frame slider)");
   c->callback([st] {
     configure_logging();
     apply_flag_strings(st->s, st->o);
+    if (st->viewer && !viewer_available())
+      fail(ErrorCategory::unsupported,
+           "--viewer: this cvd was built without the viewer's script (needs node and `npm ci "
+           "--prefix tools/viewer/web` before cmake; scripts/install-deps.sh does both)");
     if (!st->o.gt.empty() && !std::filesystem::is_directory(st->o.gt))
       fail(ErrorCategory::invalid_argument, "--gt {}: ground-truth directory not found",
            st->o.gt.string());
@@ -135,6 +143,11 @@ const CommandRegistration reg(20, [](CLI::App& app) {
     if (process_group().rank() != 0) return;  // rank 0 reports (and wrote the outputs)
     print_summary(r, st->o);
     if (!st->o.gt.empty()) evaluate_against_ground_truth(st->o);
+    if (st->viewer) {
+      ViewerSummary v = write_viewer(st->o.out);
+      for (const std::string& w : v.warnings) spdlog::warn("{}", w);
+      fmt::print("viewer: {}\n", v.file.string());
+    }
   });
 });
 

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Depth networks, ours vs PyTorch on CPU, same weights and inputs: inference and one training
 # step (forward in BN train mode + backward + Adam) with 8 images, MiDaS v2 and Mannequin at
-# 384x224, MiDaS small at 256x160. Each configuration runs in its own process (one warm-up
+# 384x224, MiDaS small at 256x160, Depth Anything V2 ViT-S at 518x392 (DA2_HEIGHT / DA2_WIDTH). Each configuration runs in its own process (one warm-up
 # iteration, then ITERS timed) so that peak RSS is its own. Prints a table: seconds, the ratio
 # PyTorch / ours (> 1: we are faster), peak RSS of each, MFU against PEAK_GFLOPS and, for a
 # training step, the relative difference of the two losses (same weights, inputs and loss, so it
@@ -33,7 +33,9 @@ trap 'rm -rf "$TMP"' EXIT
 echo "# $(date -u +%Y-%m-%dT%H:%MZ) $(lscpu | sed -n 's/^Model name: *//p'), $(nproc) cores, OMP_NUM_THREADS=$OMP_NUM_THREADS, peak $PEAK GFLOP/s, loss $LOSS, ours in $PRECISION"
 printf '%-12s %-6s %-8s %9s %9s %7s %10s %10s %8s %8s %9s\n' arch mode size ours_s torch_s ratio ours_MiB torch_MiB ours_mfu torch_mfu loss_rdiff
 for arch in "${ARCHS[@]}"; do
-  if [ "$arch" = midas_small ]; then H=160; W=256; else H=224; W=384; fi
+  if [ "$arch" = midas_small ]; then H=160; W=256;
+  elif [ "$arch" = depth_anything_v2 ]; then H=${DA2_HEIGHT:-392}; W=${DA2_WIDTH:-518};
+  else H=224; W=384; fi
   weights="$TMP/$arch.cvdw"
   "$BIN" --arch "$arch" --save-weights "$weights"
   gmac=$("${PY[@]}" --arch "$arch" --height $H --width $W --weights "$weights" --gmac-only)

@@ -35,6 +35,12 @@ namespace cvd {
   X(upsample_bilinear2d_backward) /* in: gy; out: gx                             */               \
   X(upsample_nearest2d)           /* in: x; out: y                               */               \
   X(upsample_nearest2d_backward)  /* in: gy; out: gx                             */               \
+  X(upsample_bicubic2d)           /* in: x; out: y; UpsampleParams (A = -0.75)    */              \
+  X(upsample_bicubic2d_backward)  /* in: gy; out: gx                              */              \
+  X(layer_norm)                   /* in: x [R,C], gamma?, beta?; out: y, mean [R], invstd [R] */  \
+  X(layer_norm_backward)          /* in: gy, x, gamma?, mean, invstd; out: gx, ggamma?, gbeta? */ \
+  X(softmax)                      /* in: x [R,C]; out: y (over C)                         */      \
+  X(softmax_backward)             /* in: gy, y; out: gx                                   */      \
   X(matmul)                       /* in: a [B,M,K], b [B,K,N]; out: c [B,M,N]; MatmulParams */    \
   X(grid_sample)                  /* in: x, grid; out: y; GridSampleParams                */      \
   X(grid_sample_backward)         /* in: gy, x, grid; out: gx, ggrid                      */      \

@@ -15,7 +15,7 @@ namespace cvd {
 
 template <class T>
 CVD_HOST_DEVICE T unary_forward(UnaryOp op, T x, T a, T b) {
-  using std::exp, std::log, std::pow, std::sqrt, std::tanh;  // float overloads for float
+  using std::erf, std::exp, std::log, std::pow, std::sqrt, std::tanh;  // float overloads
   switch (op) {
     case UnaryOp::relu:
       return x > T(0) ? x : T(0);
@@ -45,6 +45,8 @@ CVD_HOST_DEVICE T unary_forward(UnaryOp op, T x, T a, T b) {
       return x * a;
     case UnaryOp::add_scalar:
       return x + a;
+    case UnaryOp::gelu:
+      return T(0.5) * x * (T(1) + erf(x * T(0.70710678118654752440)));
   }
   return x;
 }
@@ -61,6 +63,7 @@ CVD_HOST_DEVICE UnaryOperands unary_backward_reads(UnaryOp op) {
     case UnaryOp::log:
     case UnaryOp::abs:
     case UnaryOp::pow_scalar:
+    case UnaryOp::gelu:
       return {true, false};
     case UnaryOp::relu:
     case UnaryOp::clip:
@@ -82,7 +85,7 @@ CVD_HOST_DEVICE UnaryOperands unary_backward_reads(UnaryOp op) {
 // names are read).
 template <class T>
 CVD_HOST_DEVICE T unary_backward(UnaryOp op, T gy, T x, T y, T a, T b) {
-  using std::pow;
+  using std::erf, std::exp, std::pow;
   switch (op) {
     case UnaryOp::relu:
       return y > T(0) ? gy : T(0);
@@ -112,6 +115,9 @@ CVD_HOST_DEVICE T unary_backward(UnaryOp op, T gy, T x, T y, T a, T b) {
       return gy * a;
     case UnaryOp::add_scalar:
       return gy;
+    case UnaryOp::gelu:  // Phi(x) + x phi(x)
+      return gy * (T(0.5) * (T(1) + erf(x * T(0.70710678118654752440))) +
+                   x * T(0.39894228040143267794) * exp(T(-0.5) * x * x));
   }
   return gy;
 }
@@ -194,6 +200,48 @@ CVD_HOST_DEVICE LinearResizeTaps<T> resize_linear_taps(long o, long in, long out
   T w1 = src - T(i0);
   w1 = w1 < T(0) ? T(0) : (w1 > T(1) ? T(1) : w1);
   return {i0, i1, T(1) - w1, w1};
+}
+
+// The four source taps of output index o along one axis of a bicubic resize (PyTorch
+// upsample_bicubic2d, A = -0.75): indices floor(src) - 1 .. floor(src) + 2 clamped to [0, in - 1]
+// and their weights. src = o * (in - 1) / (out - 1) with align_corners, else (o + 0.5) / scale -
+// 0.5 with scale = the given scale factor when > 0, else out / in; not clamped at 0 (PyTorch's
+// cubic source index).
+template <class T>
+CVD_HOST_DEVICE T cubic_convolution1(T x, T A) {  // |x| <= 1
+  return ((A + T(2)) * x - (A + T(3))) * x * x + T(1);
+}
+template <class T>
+CVD_HOST_DEVICE T cubic_convolution2(T x, T A) {  // 1 < |x| < 2
+  return ((A * x - T(5) * A) * x + T(8) * A) * x - T(4) * A;
+}
+template <class T>
+struct CubicResizeTaps {
+  long i[4];
+  T w[4];
+};
+template <class T>
+CVD_HOST_DEVICE CubicResizeTaps<T> resize_cubic_taps(long o, long in, long out, bool align_corners,
+                                                     double scale) {
+  T src;
+  if (align_corners)
+    src = out > 1 ? T(o) * T(in - 1) / T(out - 1) : T(0);
+  else
+    src = (T(o) + T(0.5)) * (scale > 0 ? T(1.0 / scale) : T(in) / T(out)) - T(0.5);
+  const T f = floor(src);
+  const T t = src - f;
+  const T A = T(-0.75);
+  CubicResizeTaps<T> taps;
+  taps.w[0] = cubic_convolution2<T>(t + T(1), A);
+  taps.w[1] = cubic_convolution1<T>(t, A);
+  taps.w[2] = cubic_convolution1<T>(T(1) - t, A);
+  taps.w[3] = cubic_convolution2<T>(T(2) - t, A);
+  const long base = static_cast<long>(f) - 1;
+  for (int k = 0; k < 4; ++k) {
+    const long idx = base + k;
+    taps.i[k] = idx < 0 ? 0 : (idx > in - 1 ? in - 1 : idx);
+  }
+  return taps;
 }
 
 // grid_sample source pixel coordinate of the normalised value g along an axis of `size` pixels

@@ -11,21 +11,26 @@ struct FillParams {
   double value = 0.0;
 };
 
+// The unary ops, one X(name) each (the enum, op names and the CPU kernels' compile-time switch
+// are generated from this list):
+//   relu        max(x, 0)
+//   clip        min(max(x, a), b) (relu6 = clip 0..6); gradient 1 strictly inside (a, b)
+//   leaky_relu  x > 0 ? x : a * x
+//   sigmoid, tanh, exp, log, sqrt, neg, reciprocal
+//   abs         gradient sign(x), 0 at 0
+//   pow_scalar  x ^ a
+//   mul_scalar  x * a
+//   add_scalar  x + a
+//   gelu        0.5 x (1 + erf(x / sqrt 2)) (PyTorch's default GELU); gradient Phi(x) + x phi(x)
+#define CVD_UNARY_OPS(X)                                                                           \
+  X(relu)                                                                                          \
+  X(clip)                                                                                          \
+  X(leaky_relu) X(sigmoid) X(tanh) X(exp) X(log) X(abs) X(sqrt) X(neg) X(reciprocal) X(pow_scalar) \
+      X(mul_scalar) X(add_scalar) X(gelu)
 enum class UnaryOp : int {
-  relu,        // max(x, 0)
-  clip,        // min(max(x, a), b)   (relu6 = clip 0..6); gradient 1 strictly inside (a, b)
-  leaky_relu,  // x > 0 ? x : a * x
-  sigmoid,
-  tanh,
-  exp,
-  log,
-  abs,  // gradient sign(x), 0 at 0
-  sqrt,
-  neg,
-  reciprocal,
-  pow_scalar,  // x ^ a
-  mul_scalar,  // x * a
-  add_scalar,  // x + a
+#define CVD_X(name) name,
+  CVD_UNARY_OPS(CVD_X)
+#undef CVD_X
 };
 struct UnaryParams {
   UnaryOp op = UnaryOp::relu;
@@ -107,6 +112,17 @@ struct Pool2dParams {
 // clamped below at 0 (PyTorch). Nearest: floor(o * in / out) (PyTorch "nearest").
 struct UpsampleParams {
   bool align_corners = false;
+  // Bicubic only: the scale factor PyTorch's interpolate was given (scale_factor=, not size=), which
+  // then sets the source coordinate (o + 0.5) / scale - 0.5 instead of (o + 0.5) * in / out - 0.5
+  // (align_corners false); 0 = none. Ignored with align_corners.
+  double scale_h = 0.0, scale_w = 0.0;
+};
+
+// Layer norm over the last dimension of x viewed as [rows, C] (PyTorch LayerNorm(C, eps)):
+// y = (x - mean) * invstd * gamma + beta, invstd = 1 / sqrt(var + eps), biased variance; the
+// forward writes mean and invstd per row for the backward.
+struct LayerNormParams {
+  double eps = 1e-5;
 };
 
 struct MatmulParams {

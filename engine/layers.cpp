@@ -235,8 +235,29 @@ std::string Linear::extra_repr() const {
                      bias.defined() ? "True" : "False");
 }
 
+LayerNorm::LayerNorm(int64_t normalized_shape, double eps, bool elementwise_affine, DType dtype)
+    : c_(normalized_shape), eps_(eps) {
+  CVD_CHECK(normalized_shape > 0 && eps >= 0, "LayerNorm: invalid size {} or eps {}",
+            normalized_shape, eps);
+  if (elementwise_affine) {
+    weight = register_parameter("weight", Tensor::full({normalized_shape}, 1.0, dtype));
+    bias = register_parameter("bias", Tensor::full({normalized_shape}, 0.0, dtype));
+  }
+}
+
+Tensor LayerNorm::forward(const Tensor& x) {
+  CVD_CHECK(x.dim() >= 1 && x.size(-1) == c_, "LayerNorm: expected [..., {}], got {}", c_, x.str());
+  return layer_norm(x, weight, bias, eps_);
+}
+
+std::string LayerNorm::extra_repr() const {
+  return fmt::format("({},), eps={}, elementwise_affine={}", c_, eps_,
+                     weight.defined() ? "True" : "False");
+}
+
 // ---- Activations -------------------------------------------------------------------------------
 
+Tensor GELU::forward(const Tensor& x) { return gelu(x); }
 Tensor ReLU::forward(const Tensor& x) { return relu(x); }
 Tensor ReLU6::forward(const Tensor& x) { return relu6(x); }
 Tensor LeakyReLU::forward(const Tensor& x) { return leaky_relu(x, negative_slope_); }

@@ -210,7 +210,31 @@ class Linear : public Module {
   int64_t in_features_, out_features_;
 };
 
+// LayerNorm(C, eps) over the last dimension: weight 1, bias 0 (without elementwise_affine: none).
+class LayerNorm : public Module {
+ public:
+  LayerNorm(int64_t normalized_shape, double eps = 1e-5, bool elementwise_affine = true,
+            DType dtype = DType::f32);
+  Tensor forward(const Tensor& x) override;
+  std::string type_name() const override { return "LayerNorm"; }
+  std::string extra_repr() const override;
+  double eps() const { return eps_; }
+
+  Tensor weight, bias;  // [C]; undefined without elementwise_affine
+
+ private:
+  int64_t c_;
+  double eps_;
+};
+
 // ---- Activations and parameter-free layers ------------------------------------------------------
+
+// GELU, erf form (PyTorch nn.GELU()).
+class GELU : public Module {
+ public:
+  Tensor forward(const Tensor& x) override;
+  std::string type_name() const override { return "GELU"; }
+};
 
 class ReLU : public Module {
  public:

@@ -87,7 +87,15 @@ const char* op_family(OpId op) {
     case OpId::upsample_bilinear2d_backward:
     case OpId::upsample_nearest2d:
     case OpId::upsample_nearest2d_backward:
+    case OpId::upsample_bicubic2d:
+    case OpId::upsample_bicubic2d_backward:
       return "resample";
+    case OpId::layer_norm:
+    case OpId::layer_norm_backward:
+      return "layer_norm";
+    case OpId::softmax:
+    case OpId::softmax_backward:
+      return "softmax";
     case OpId::matmul:
       return "matmul";
     case OpId::unary:

@@ -27,6 +27,7 @@ Tensor pow(const Tensor& x, double exponent);
 Tensor square(const Tensor& x);
 Tensor add_scalar(const Tensor& x, double s);
 Tensor mul_scalar(const Tensor& x, double s);
+Tensor gelu(const Tensor& x);  // erf form (PyTorch's default)
 Tensor unary(const Tensor& x, const UnaryParams& p);
 
 // ---- Element-wise, binary with NumPy broadcasting -------------------------------------------
@@ -67,7 +68,7 @@ Tensor concat(const std::vector<Tensor>& xs, int dim);
 // Negative amounts crop.
 Tensor pad(const Tensor& x, const std::vector<int64_t>& pads, double value = 0.0);
 
-// ---- Neural-network ops ---------------------------------------------------------------------
+// ---- Neural-network ops (row normalisations: ops_rows.cpp) ------------------------------------
 // x [N, C, H, W]; w [O, C/groups, kh, kw]; b [O] or undefined.
 Tensor conv2d(const Tensor& x, const Tensor& w, const Tensor& b, const Conv2dParams& p);
 // w [C, O/groups, kh, kw].
@@ -81,10 +82,19 @@ Tensor max_pool2d(const Tensor& x, const Pool2dParams& p);
 Tensor avg_pool2d(const Tensor& x, const Pool2dParams& p);
 Tensor upsample_bilinear2d(const Tensor& x, int64_t out_h, int64_t out_w, bool align_corners);
 Tensor upsample_nearest2d(const Tensor& x, int64_t out_h, int64_t out_w);
-// a [..., M, K] x b [..., K, N]; 2-D, or 3-D with equal batch, or b 2-D shared across a's batch.
+// PyTorch bicubic (A = -0.75). scale_h / scale_w > 0: the scale factors PyTorch's interpolate was
+// given (scale_factor=), which set the source coordinates (see UpsampleParams); 0 = out / in.
+Tensor upsample_bicubic2d(const Tensor& x, int64_t out_h, int64_t out_w, bool align_corners,
+                          double scale_h = 0.0, double scale_w = 0.0);
+// a [..., M, K] x b [..., K, N] with NumPy broadcasting of the batch dims ([..]); b 2-D is
+// shared by every row of a.
 Tensor matmul(const Tensor& a, const Tensor& b);
 // x [..., in]; w [out, in]; b [out] or undefined.
 Tensor linear(const Tensor& x, const Tensor& w, const Tensor& b);
+// Over the last dimension (PyTorch LayerNorm(C, eps)); gamma / beta [C] or undefined.
+Tensor layer_norm(const Tensor& x, const Tensor& gamma, const Tensor& beta, double eps = 1e-5);
+// Over the last dimension, numerically stable (the row maximum subtracted first).
+Tensor softmax(const Tensor& x);
 // x [N, C, H, W]; grid [N, Ho, Wo, 2] -> [N, C, Ho, Wo].
 Tensor grid_sample(const Tensor& x, const Tensor& grid, const GridSampleParams& p);
 

@@ -1,5 +1,7 @@
 // Neural-network ops: convolutions, batch norm, pooling, resizing, matmul/linear, grid_sample.
 // Each forward runs its kernel and records a backward that runs the matching backward kernels.
+#include <cmath>
+
 #include "engine/op_support.h"
 
 namespace cvd {
@@ -193,12 +195,11 @@ Tensor avg_pool2d(const Tensor& x_in, const Pool2dParams& p) {
 }
 
 // ---- resizing --------------------------------------------------------------------------------
-static Tensor upsample(const Tensor& x_in, int64_t oh, int64_t ow, bool align_corners, OpId fwd,
-                       OpId bwd, const char* name) {
+static Tensor upsample(const Tensor& x_in, int64_t oh, int64_t ow, const UpsampleParams& p,
+                       OpId fwd, OpId bwd, const char* name) {
   CVD_CHECK(x_in.dim() == 4, "{}: x {} must be 4-d", name, x_in.str());
   CVD_CHECK(oh > 0 && ow > 0, "{}: output size {}x{} must be positive", name, oh, ow);
   Tensor x = x_in.contiguous();
-  UpsampleParams p{align_corners};
   Tensor y = empty_like_kind({x.size(0), x.size(1), oh, ow}, x);
   dispatch(fwd, x, KernelArgs{{x}, {y}, &p});
   if (!any_requires_grad({x})) return y;
@@ -212,13 +213,23 @@ static Tensor upsample(const Tensor& x_in, int64_t oh, int64_t ow, bool align_co
 }
 
 Tensor upsample_bilinear2d(const Tensor& x, int64_t oh, int64_t ow, bool align_corners) {
-  return upsample(x, oh, ow, align_corners, OpId::upsample_bilinear2d,
+  return upsample(x, oh, ow, UpsampleParams{align_corners}, OpId::upsample_bilinear2d,
                   OpId::upsample_bilinear2d_backward, "upsample_bilinear2d");
 }
 
 Tensor upsample_nearest2d(const Tensor& x, int64_t oh, int64_t ow) {
-  return upsample(x, oh, ow, false, OpId::upsample_nearest2d, OpId::upsample_nearest2d_backward,
-                  "upsample_nearest2d");
+  return upsample(x, oh, ow, UpsampleParams{}, OpId::upsample_nearest2d,
+                  OpId::upsample_nearest2d_backward, "upsample_nearest2d");
+}
+
+Tensor upsample_bicubic2d(const Tensor& x, int64_t oh, int64_t ow, bool align_corners,
+                          double scale_h, double scale_w) {
+  CVD_CHECK(scale_h >= 0 && scale_w >= 0 && std::isfinite(scale_h) && std::isfinite(scale_w),
+            "upsample_bicubic2d: scale factors must be finite and >= 0, got {}, {}", scale_h,
+            scale_w);
+  return upsample(x, oh, ow, UpsampleParams{align_corners, scale_h, scale_w},
+                  OpId::upsample_bicubic2d, OpId::upsample_bicubic2d_backward,
+                  "upsample_bicubic2d");
 }
 
 // ---- matmul / linear -------------------------------------------------------------------------
@@ -231,12 +242,36 @@ static Tensor matmul3(const Tensor& a, const Tensor& b, bool ta, bool tb) {
   return c;
 }
 
+// Broadcast batch dims: both operands expanded to the common batch shape and flattened to 3-d
+// (expand's backward sums the gradient back over the broadcast dims).
+static Tensor matmul_broadcast(const Tensor& a_in, const Tensor& b_in) {
+  Shape ab(a_in.shape().begin(), a_in.shape().end() - 2);
+  Shape bb(b_in.shape().begin(), b_in.shape().end() - 2);
+  Shape batch = broadcast_shapes(ab, bb);
+  int64_t count = 1;
+  for (int64_t d : batch) count *= d;
+  const int64_t M = a_in.size(-2), K = a_in.size(-1), N = b_in.size(-1);
+  auto flat = [&](const Tensor& t, int64_t rows, int64_t cols) {
+    Shape full = batch;
+    full.push_back(rows);
+    full.push_back(cols);
+    return reshape(expand(t, full), {count, rows, cols});
+  };
+  Tensor c = matmul(flat(a_in, M, K), flat(b_in, K, N));
+  Shape out = batch;
+  out.push_back(M);
+  out.push_back(N);
+  return reshape(c, out);
+}
+
 Tensor matmul(const Tensor& a_in, const Tensor& b_in) {
   check_same_kind("matmul", a_in, b_in);
-  CVD_CHECK(a_in.dim() >= 2 && b_in.dim() >= 2 && b_in.dim() <= 3,
-            "matmul: unsupported shapes {} x {}", a_in.str(), b_in.str());
+  CVD_CHECK(a_in.dim() >= 2 && b_in.dim() >= 2, "matmul: unsupported shapes {} x {}", a_in.str(),
+            b_in.str());
   int64_t K = a_in.size(-1);
   CVD_CHECK(b_in.size(-2) == K, "matmul: inner sizes differ: {} x {}", a_in.str(), b_in.str());
+  const bool same_3d = a_in.dim() == 3 && b_in.dim() == 3 && a_in.size(0) == b_in.size(0);
+  if (b_in.dim() > 2 && !same_3d) return matmul_broadcast(a_in, b_in);
   Shape out = a_in.shape();
   out.back() = b_in.size(-1);
   Tensor a, b;
@@ -245,8 +280,6 @@ Tensor matmul(const Tensor& a_in, const Tensor& b_in) {
     a = a_in.contiguous().reshape({1, a_in.numel() / K, K});
     b = b_in.contiguous().reshape({1, K, b_in.size(1)});
   } else {
-    CVD_CHECK(a_in.dim() == 3 && a_in.size(0) == b_in.size(0),
-              "matmul: batch sizes differ: {} x {}", a_in.str(), b_in.str());
     a = a_in.contiguous();
     b = b_in.contiguous();
   }

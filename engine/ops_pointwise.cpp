@@ -9,34 +9,11 @@ using detail::empty_like_kind;
 
 static const char* unary_name(UnaryOp op) {
   switch (op) {
-    case UnaryOp::relu:
-      return "relu";
-    case UnaryOp::clip:
-      return "clip";
-    case UnaryOp::leaky_relu:
-      return "leaky_relu";
-    case UnaryOp::sigmoid:
-      return "sigmoid";
-    case UnaryOp::tanh:
-      return "tanh";
-    case UnaryOp::exp:
-      return "exp";
-    case UnaryOp::log:
-      return "log";
-    case UnaryOp::abs:
-      return "abs";
-    case UnaryOp::sqrt:
-      return "sqrt";
-    case UnaryOp::neg:
-      return "neg";
-    case UnaryOp::reciprocal:
-      return "reciprocal";
-    case UnaryOp::pow_scalar:
-      return "pow";
-    case UnaryOp::mul_scalar:
-      return "mul_scalar";
-    case UnaryOp::add_scalar:
-      return "add_scalar";
+#define CVD_X(name)   \
+  case UnaryOp::name: \
+    return #name;
+    CVD_UNARY_OPS(CVD_X)
+#undef CVD_X
   }
   return "unary";
 }
@@ -76,6 +53,7 @@ Tensor pow(const Tensor& x, double e) { return unary(x, {UnaryOp::pow_scalar, e}
 Tensor square(const Tensor& x) { return unary(x, {UnaryOp::pow_scalar, 2.0}); }
 Tensor add_scalar(const Tensor& x, double s) { return unary(x, {UnaryOp::add_scalar, s}); }
 Tensor mul_scalar(const Tensor& x, double s) { return unary(x, {UnaryOp::mul_scalar, s}); }
+Tensor gelu(const Tensor& x) { return unary(x, {UnaryOp::gelu}); }
 
 Shape broadcast_shapes(const Shape& a, const Shape& b) {
   size_t n = std::max(a.size(), b.size());

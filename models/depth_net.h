@@ -38,12 +38,25 @@ class DepthNet : public Module {
   // it in registration order; modules the forward never runs (e.g. MiDaS v2's
   // scratch.refinenet4.resConfUnit1) are left out. Default {""}: registration order.
   virtual std::vector<std::string> execution_order() const { return {""}; }
+  // State names (or module prefixes) the network holds, as its released state dicts do, that its
+  // forward never reads (so an exported graph has no counterpart; the converter leaves them).
+  virtual std::vector<std::string> unused_in_forward() const { return {}; }
 
-  // Positive depth from the raw output: [N, 1, H, W].
+  // Positive depth from the raw output: [N, 1, H, W]. Inverse-depth networks: 1 / max(raw, 1e-4),
+  // or with a disparity affine set, 1 / max(scale * raw + shift, floor).
   Tensor depth_from_raw(const Tensor& raw) const;
+  // For affine-invariant disparity (Depth Anything V2): the scale and shift that map the raw
+  // output to the poses' inverse depth, and the smallest disparity kept (set by the pipeline's
+  // calibration, pipeline/geometry/disparity_affine.h). Not a parameter: never trained or saved.
+  void set_disparity_affine(double scale, double shift, double floor);
+  bool has_disparity_affine() const { return affine_; }
   // Positive depth for RGB in [0, 1]: [N, 1, H, W]. Recorded for autograd in grad mode.
   Tensor depth(const Tensor& rgb01) { return depth_from_raw(forward_raw(normalize_input(rgb01))); }
   Tensor forward(const Tensor& rgb01) override { return depth(rgb01); }
+
+ private:
+  bool affine_ = false;
+  double affine_scale_ = 1.0, affine_shift_ = 0.0, affine_floor_ = 1e-4;
 };
 
 // Creates an architecture of models/depth_net_architectures.h with random weights drawn from `gen`

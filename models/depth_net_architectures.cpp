@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include "engine/error.h"
+#include "models/depth_anything_v2.h"
 #include "models/mannequin.h"
 #include "models/midas_small.h"
 #include "models/midas_v2.h"
@@ -28,6 +29,10 @@ const std::vector<DepthNetArchitecture>& depth_net_architectures() {
        "MiDaS v2, ResNeXt-101 encoder (inverse depth)"},
       {"midas_small", &make<MidasSmallNet>, DepthOutputKind::inverse_depth, 32, 1e-4, 1e-4,
        "MiDaS v2.1 small, EfficientNet-Lite3 encoder (inverse depth)"},
+      // Provisional: MiDaS's values until measured (issue 22, item 5).
+      {"depth_anything_v2", &make<DepthAnythingV2Net>, DepthOutputKind::inverse_depth, 14, 1e-4,
+       1e-4, "Depth Anything V2 ViT-S, DINOv2 encoder + DPT head (affine-invariant inverse depth)",
+       /*affine_disparity=*/true},
   };
   return table;
 }

@@ -19,6 +19,9 @@ struct DepthNetArchitecture {
   double default_lr;      // Adam learning rate of test-time training
   double default_lambda;  // weight of the disparity term of the geometric loss
   const char* summary;    // one line for help texts
+  // Relative inverse depth up to scale AND shift (Depth Anything): converted weights get a
+  // robust scale-and-shift fit to the sparse points instead of the scale calibration.
+  bool affine_disparity = false;
 };
 
 // Every architecture, the default network's first.

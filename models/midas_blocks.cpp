@@ -67,14 +67,27 @@ FeatureFusionBlock::FeatureFusionBlock(int64_t features, int64_t out_features, b
 Tensor FeatureFusionBlock::forward(const Tensor& x0) { return finish(x0); }
 
 Tensor FeatureFusionBlock::forward(const Tensor& x0, const Tensor& skip) {
-  CVD_CHECK(rcu1_ != nullptr, "{}: built without resConfUnit1, cannot fuse a skip input",
-            type_name());
-  return finish(add(x0, rcu1_->forward(skip)));
+  return forward_to(x0, skip, 0, 0);
 }
 
-Tensor FeatureFusionBlock::finish(const Tensor& o) {
+Tensor FeatureFusionBlock::forward_to(const Tensor& x0, int64_t out_h, int64_t out_w) {
+  return finish(x0, out_h, out_w);
+}
+
+Tensor FeatureFusionBlock::forward_to(const Tensor& x0, const Tensor& skip, int64_t out_h,
+                                      int64_t out_w) {
+  CVD_CHECK(rcu1_ != nullptr, "{}: built without resConfUnit1, cannot fuse a skip input",
+            type_name());
+  return finish(add(x0, rcu1_->forward(skip)), out_h, out_w);
+}
+
+Tensor FeatureFusionBlock::finish(const Tensor& o, int64_t out_h, int64_t out_w) {
   Tensor y = rcu2_->forward(o);
-  y = upsample_bilinear2d(y, y.size(2) * 2, y.size(3) * 2, /*align_corners=*/true);
+  if (out_h <= 0 || out_w <= 0) {
+    out_h = y.size(2) * 2;
+    out_w = y.size(3) * 2;
+  }
+  y = upsample_bilinear2d(y, out_h, out_w, /*align_corners=*/true);
   return out_conv_ ? out_conv_->forward(y) : y;
 }
 

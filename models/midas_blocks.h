@@ -67,12 +67,15 @@ class FeatureFusionBlock : public Module {
   // Top of the decoder: no skip input.
   Tensor forward(const Tensor& x0) override;
   Tensor forward(const Tensor& x0, const Tensor& skip);
+  // As forward, resizing to out_h x out_w instead of 2x (Depth Anything's DPT head: size=).
+  Tensor forward_to(const Tensor& x0, int64_t out_h, int64_t out_w);
+  Tensor forward_to(const Tensor& x0, const Tensor& skip, int64_t out_h, int64_t out_w);
   std::string type_name() const override {
     return out_conv_ ? "FeatureFusionBlock_custom" : "FeatureFusionBlock";
   }
 
  private:
-  Tensor finish(const Tensor& o);
+  Tensor finish(const Tensor& o, int64_t out_h = 0, int64_t out_w = 0);  // 0: twice the size
   std::shared_ptr<Conv2d> out_conv_;
   std::shared_ptr<ResidualConvUnit> rcu1_, rcu2_;
 };

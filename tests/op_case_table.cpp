@@ -95,6 +95,7 @@ std::vector<OpCase> all_op_cases() {
   c.push_back(unary_case("reciprocal", Init::positive, [](auto& x) { return reciprocal(x); }));
   c.push_back(unary_case("pow", Init::positive, [](auto& x) { return pow(x, 1.7); }));
   c.push_back(unary_case("mul_add_scalar", Init::normal, [](auto& x) { return x * 2.5 + 1.0; }));
+  c.push_back(unary_case("gelu", Init::normal, [](auto& x) { return gelu(x * 2.0); }));
   // ---- binary, with broadcasting ----
   auto bin = [&](const std::string& n, Shape a, Shape b, Init ib,
                  std::function<Tensor(const Tensor&, const Tensor&)> f) {
@@ -219,6 +220,40 @@ std::vector<OpCase> all_op_cases() {
   c.push_back({"nearest_odd", {{{1, 2, 5, 3}}}, [](const In& t) {
                  return upsample_nearest2d(t[0], 7, 4);
                }});
+  c.push_back({"bicubic_up_noac", {{{2, 3, 4, 5}}}, [](const In& t) {
+                 return upsample_bicubic2d(t[0], 9, 7, false);
+               }});
+  c.push_back({"bicubic_up_ac", {{{1, 2, 5, 3}}}, [](const In& t) {
+                 return upsample_bicubic2d(t[0], 7, 8, true);
+               }});
+  c.push_back({"bicubic_down", {{{1, 2, 9, 8}}}, [](const In& t) {
+                 return upsample_bicubic2d(t[0], 4, 3, false);
+               }});
+  // DINOv2's position-embedding resize: scale factors (n + 0.1) / M given, not the sizes.
+  c.push_back({"bicubic_scale_factor", {{{1, 3, 5, 5}}}, [](const In& t) {
+                 return upsample_bicubic2d(t[0], 7, 4, false, 7.1 / 5, 4.1 / 5);
+               }});
+  c.push_back({"bicubic_same_size_scaled", {{{1, 2, 4, 4}}}, [](const In& t) {
+                 return upsample_bicubic2d(t[0], 4, 4, false, 4.1 / 4, 4.1 / 4);
+               }});
+  c.push_back({"bicubic_from_1px", {{{1, 2, 1, 1}}}, [](const In& t) {
+                 return upsample_bicubic2d(t[0], 3, 2, false);
+               }});
+  // ---- row normalisations (the transformer's) ----
+  c.push_back({"layer_norm_affine", {{{2, 5, 7}}, {{7}, Init::positive}, {{7}}}, [](const In& t) {
+                 return layer_norm(t[0], t[1], t[2], 1e-6);
+               }});
+  c.push_back({"layer_norm_plain", {{{6, 4}}}, [](const In& t) {
+                 return layer_norm(t[0], Tensor(), Tensor());
+               }});
+  c.push_back({"layer_norm_one_column", {{{3, 1}}, {{1}}, {{1}}}, [](const In& t) {
+                 return layer_norm(t[0], t[1], t[2]);
+               }});
+  c.push_back({"softmax_rows", {{{2, 3, 6}}}, [](const In& t) { return softmax(t[0] * 3.0); }});
+  c.push_back({"softmax_one_column", {{{4, 1}}}, [](const In& t) { return softmax(t[0]); }});
+  // Rows far from 0: the maximum must be subtracted (exp(90) overflows f32).
+  c.push_back(
+      {"softmax_large_logits", {{{3, 5}}}, [](const In& t) { return softmax(t[0] + 90.0); }});
   // ---- matmul / linear ----
   c.push_back({"matmul_2d", {{{3, 4}}, {{4, 5}}}, [](const In& t) { return matmul(t[0], t[1]); }});
   c.push_back({"matmul_batched", {{{2, 3, 4}}, {{2, 4, 5}}}, [](const In& t) {
@@ -228,6 +263,26 @@ std::vector<OpCase> all_op_cases() {
       {"matmul_shared_b", {{{2, 3, 4}}, {{4, 2}}}, [](const In& t) { return matmul(t[0], t[1]); }});
   c.push_back({"linear", {{{3, 6}}, {{4, 6}}, {{4}}}, [](const In& t) {
                  return linear(t[0], t[1], t[2]);
+               }});
+  c.push_back({"linear_tokens", {{{2, 5, 6}}, {{4, 6}}, {{4}}}, [](const In& t) {
+                 return linear(t[0], t[1], t[2]);
+               }});
+  // Attention-shaped products: [B, H, N, d] x [B, H, d, N], and broadcast batch dims.
+  c.push_back({"matmul_4d", {{{2, 3, 4, 5}}, {{2, 3, 5, 4}}}, [](const In& t) {
+                 return matmul(t[0], t[1]);
+               }});
+  c.push_back({"matmul_4d_transposed_b", {{{2, 2, 4, 3}}, {{2, 2, 4, 3}}}, [](const In& t) {
+                 return matmul(t[0], transpose(t[1], -2, -1));
+               }});
+  c.push_back({"matmul_broadcast_batch", {{{2, 1, 3, 4}}, {{3, 4, 5}}}, [](const In& t) {
+                 return matmul(t[0], t[1]);
+               }});
+  c.push_back(
+      {"matmul_2d_by_3d", {{{3, 4}}, {{2, 4, 5}}}, [](const In& t) { return matmul(t[0], t[1]); }});
+  // A whole attention head, as the ViT composes it.
+  c.push_back({"attention", {{{2, 2, 5, 4}}, {{2, 2, 5, 4}}, {{2, 2, 5, 4}}}, [](const In& t) {
+                 Tensor a = softmax(matmul(t[0], transpose(t[1], -2, -1)) * 0.5);
+                 return matmul(a, t[2]);
                }});
   // ---- grid_sample ----
   for (bool ac : {false, true}) {

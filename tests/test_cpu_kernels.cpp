@@ -87,6 +87,7 @@ const std::vector<UnaryCase> kUnaryCases = {
     {UnaryOp::pow_scalar, 1.7, 0, true, "pow_scalar"},
     {UnaryOp::mul_scalar, -3.5, 0, false, "mul_scalar"},
     {UnaryOp::add_scalar, 0.25, 0, false, "add_scalar"},
+    {UnaryOp::gelu, 0, 0, false, "gelu"},
 };
 
 TEST(CpuKernels, UnaryForwardAndBackward) {
@@ -368,3 +369,39 @@ TEST(CpuKernels, SgdUpdate) {
 
 }  // namespace
 }  // namespace cvd
+
+namespace cvd::test {
+namespace {
+
+// Layer norm and softmax over the last dim, as the ViT uses them (rows of its width, many rows:
+// the threaded path and the per-thread gamma / beta partial sums) and at the edges (one column,
+// one row).
+TEST(CpuKernels, LayerNormAndSoftmaxRows) {
+  Generator gen(23);
+  for (const Shape& s :
+       {Shape{1, 1}, Shape{5, 1}, Shape{1, 9}, Shape{3, 7, 13}, Shape{2, 600, 384}}) {
+    const Shape c{s.back()};
+    int64_t rows = 1;
+    for (size_t d = 0; d + 1 < s.size(); ++d) rows *= s[d];
+    const std::string what = shape_text(s);
+    const LayerNormParams p{1e-6};
+    const Pair x = normal(s, gen, 3.0), gamma = uniform(c, gen, 0.5, 1.5), beta = normal(c, gen);
+    const Results fwd = run_both(OpId::layer_norm, {x, gamma, beta}, {s, {rows}, {rows}}, &p);
+    expect_close(fwd, 1e-5, "layer_norm " + what);
+    const Results plain = run_both(OpId::layer_norm, {x, Pair{}, Pair{}}, {s, {rows}, {rows}}, &p);
+    expect_close(plain, 1e-5, "layer_norm without affine " + what);
+    const Pair mean = pair_of(fwd.ref.at(1), {rows}), invstd = pair_of(fwd.ref.at(2), {rows});
+    expect_close(run_both(OpId::layer_norm_backward, {normal(s, gen), x, gamma, mean, invstd},
+                          {s, c, c}, &p),
+                 1e-4, "layer_norm backward " + what);
+    const Pair logits = normal(s, gen, 5.0);
+    const Results y = run_both(OpId::softmax, {logits}, {s}, nullptr);
+    expect_close(y, 1e-5, "softmax " + what);
+    expect_close(
+        run_both(OpId::softmax_backward, {normal(s, gen), pair_of(y.ref.at(0), s)}, {s}, nullptr),
+        1e-5, "softmax backward " + what);
+  }
+}
+
+}  // namespace
+}  // namespace cvd::test

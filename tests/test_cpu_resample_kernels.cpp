@@ -51,6 +51,30 @@ TEST(CpuResampleKernels, UpsampleBilinearBothAlignModes) {
   }
 }
 
+TEST(CpuResampleKernels, UpsampleBicubic) {
+  Generator gen(18);
+  for (const ResizeCase& c : kResizeCases) {
+    const Shape out = {c.in[0], c.in[1], c.oh, c.ow};
+    for (bool ac : {false, true}) {
+      const std::string what =
+          shape_text(c.in) + " -> " + shape_text(out) + (ac ? " align_corners" : " half-pixel");
+      const UpsampleParams p{ac};
+      expect_close(run_both(OpId::upsample_bicubic2d, {normal(c.in, gen)}, {out}, &p), 1e-5,
+                   "bicubic " + what);
+      expect_close(run_both(OpId::upsample_bicubic2d_backward, {normal(out, gen)}, {c.in}, &p),
+                   1e-5, "bicubic backward " + what);
+    }
+  }
+  // DINOv2 / Depth Anything: a 37 x 37 position-embedding grid to 28 x 37 patches with the scale
+  // factors (n + 0.1) / 37 given.
+  const UpsampleParams p{false, 28.1 / 37, 37.1 / 37};
+  const Shape in{1, 16, 37, 37}, out{1, 16, 28, 37};
+  expect_close(run_both(OpId::upsample_bicubic2d, {normal(in, gen)}, {out}, &p), 1e-5,
+               "bicubic with scale factors");
+  expect_close(run_both(OpId::upsample_bicubic2d_backward, {normal(out, gen)}, {in}, &p), 1e-5,
+               "bicubic backward with scale factors");
+}
+
 TEST(CpuResampleKernels, UpsampleNearest) {
   Generator gen(9);
   for (const ResizeCase& c : kResizeCases) {

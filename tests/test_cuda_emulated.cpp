@@ -16,6 +16,7 @@
 #include "kernels/cuda/norm_pool_body.h"
 #include "kernels/cuda/pointwise_body.h"
 #include "kernels/cuda/resample_body.h"
+#include "kernels/cuda/rows_body.h"
 #include "tests/cpu_kernel_comparison.h"
 
 namespace cvd::test {
@@ -212,6 +213,63 @@ TEST(CudaEmulated, ReduceSumConcatPad) {
 }
 
 // ---- resampling ---------------------------------------------------------------------------------
+
+TEST(CudaEmulated, BicubicResizeForwardAndBackward) {
+  Generator gen(16);
+  struct Case {
+    Shape in, out;
+    UpsampleParams p;
+  };
+  const std::vector<Case> cases = {
+      {{2, 3, 5, 7}, {2, 3, 9, 11}, {false}},
+      {{1, 2, 9, 8}, {1, 2, 4, 3}, {false}},
+      {{1, 2, 5, 4}, {1, 2, 8, 7}, {true}},
+      {{1, 4, 5, 5}, {1, 4, 7, 4}, {false, 7.1 / 5, 4.1 / 5}},  // DINOv2's scale factors
+      {{1, 1, 1, 1}, {1, 1, 3, 2}, {false}}};
+  for (const Case& c : cases) {
+    const std::string what = shape_text(c.in) + " -> " + shape_text(c.out);
+    expect_close(run_emulated(cuda::upsample_bicubic2d_op<EmulatedLaunch>, OpId::upsample_bicubic2d,
+                              {normal(c.in, gen)}, {c.out}, &c.p),
+                 1e-5, "bicubic " + what);
+    expect_close(
+        run_emulated(cuda::upsample_bicubic2d_backward_op<EmulatedLaunch>,
+                     OpId::upsample_bicubic2d_backward, {normal(c.out, gen)}, {c.in}, &c.p),
+        1e-5, "bicubic backward " + what);
+  }
+}
+
+// ---- row normalisations -------------------------------------------------------------------------
+
+TEST(CudaEmulated, LayerNormAndSoftmaxForwardAndBackward) {
+  Generator gen(17);
+  for (const Shape& s : {Shape{3, 7}, Shape{2, 5, 384}, Shape{4, 1}}) {
+    const Shape c{s.back()}, rows{s.size() == 3 ? s[0] * s[1] : s[0]};
+    for (bool affine : {true, false}) {
+      const std::string what = shape_text(s) + (affine ? " affine" : "");
+      const LayerNormParams p{1e-6};
+      const Pair x = normal(s, gen, 2.0);
+      const Pair gamma = affine ? uniform(c, gen, 0.5, 1.5) : Pair{};
+      const Pair beta = affine ? normal(c, gen) : Pair{};
+      const Results fwd = run_emulated(cuda::layer_norm_op<EmulatedLaunch>, OpId::layer_norm,
+                                       {x, gamma, beta}, {s, rows, rows}, &p);
+      expect_close(fwd, 1e-5, "layer_norm " + what);
+      const Pair mean = pair_of(fwd.ref.at(1), rows), invstd = pair_of(fwd.ref.at(2), rows);
+      const std::vector<Shape> outs =
+          affine ? std::vector<Shape>{s, c, c} : std::vector<Shape>{s, kUndefined, kUndefined};
+      expect_close(
+          run_emulated(cuda::layer_norm_backward_op<EmulatedLaunch>, OpId::layer_norm_backward,
+                       {normal(s, gen), x, gamma, mean, invstd}, outs, &p),
+          1e-4, "layer_norm backward " + what);
+    }
+    const Pair logits = normal(s, gen, 4.0);
+    const Results y =
+        run_emulated(cuda::softmax_op<EmulatedLaunch>, OpId::softmax, {logits}, {s}, nullptr);
+    expect_close(y, 1e-5, "softmax " + shape_text(s));
+    expect_close(run_emulated(cuda::softmax_backward_op<EmulatedLaunch>, OpId::softmax_backward,
+                              {normal(s, gen), pair_of(y.ref.at(0), s)}, {s}, nullptr),
+                 1e-5, "softmax backward " + shape_text(s));
+  }
+}
 
 TEST(CudaEmulated, BilinearAndNearestResizeForwardAndBackward) {
   Generator gen(6);

@@ -15,7 +15,7 @@ inline namespace v1 {
 
 /// How to build or load a depth network and at what resolution to run it.
 struct DepthModelOptions {
-  /// Architecture: "mannequin", "midas_small" or "midas_v2". For load(), empty = the one named in
+  /// Architecture: "mannequin", "midas_small", "midas_v2" or "depth_anything_v2". For load(), empty = the one named in
   /// the .cvdw header; a non-empty value must match it.
   std::string arch = "mannequin";
   /// Width multiplier of create_default()'s network (load() reads it from the file header).

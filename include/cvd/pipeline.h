@@ -40,7 +40,7 @@ struct PipelineOptions {
 
   // Depth network
   std::string model;               ///< --model: .cvdw; empty = the default untrained network
-  std::string arch = "mannequin";  ///< --arch: mannequin | midas_small | midas_v2
+  std::string arch = "mannequin";  ///< --arch: mannequin | midas_small | midas_v2 | depth_anything_v2
   double width = 0.25;             ///< --width: width multiplier of the default network
 
   // Poses

@@ -12,20 +12,7 @@ void with_unary_op(UnaryOp op, F&& f) {
 #define CVD_CASE(name) \
   case UnaryOp::name:  \
     return f.template operator()<UnaryOp::name>();
-    CVD_CASE(relu)
-    CVD_CASE(clip)
-    CVD_CASE(leaky_relu)
-    CVD_CASE(sigmoid)
-    CVD_CASE(tanh)
-    CVD_CASE(exp)
-    CVD_CASE(log)
-    CVD_CASE(abs)
-    CVD_CASE(sqrt)
-    CVD_CASE(neg)
-    CVD_CASE(reciprocal)
-    CVD_CASE(pow_scalar)
-    CVD_CASE(mul_scalar)
-    CVD_CASE(add_scalar)
+    CVD_UNARY_OPS(CVD_CASE)
 #undef CVD_CASE
   }
 }
@@ -59,6 +46,7 @@ inline int64_t unary_cost(UnaryOp op) {
     case UnaryOp::exp:
     case UnaryOp::log:
     case UnaryOp::pow_scalar:
+    case UnaryOp::gelu:
       return 20;
     case UnaryOp::sqrt:
     case UnaryOp::reciprocal:

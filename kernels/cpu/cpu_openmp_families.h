@@ -12,5 +12,6 @@ void register_layout_kernels(KernelRegistry& r);       // cpu_layout.cpp
 void register_resize_kernels(KernelRegistry& r);       // cpu_resize.cpp
 void register_grid_sample_kernels(KernelRegistry& r);  // cpu_grid_sample.cpp
 void register_optimizer_kernels(KernelRegistry& r);    // cpu_optim.cpp
+void register_row_kernels(KernelRegistry& r);          // cpu_rows.cpp
 
 }  // namespace cvd::cpu

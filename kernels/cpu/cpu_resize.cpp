@@ -1,5 +1,5 @@
 // OpenMP f32 kernels of the 2-D resizes (PyTorch semantics, any output size): bilinear (both
-// align_corners modes) and nearest, forward and backward. The per-axis taps come from the shared
+// align_corners modes), bicubic and nearest, forward and backward. The per-axis taps come from the shared
 // engine/elementwise_math.h and are computed once per call; bilinear source coordinates are
 // computed in double (free, and it keeps large resizes within f32 rounding of the exact result,
 // where a float coordinate of ~150 px is already off by ~1e-5 px).
@@ -197,9 +197,77 @@ void upsample_nearest2d_backward(const KernelArgs& a) {
   });
 }
 
+// Bicubic taps of every output index along one axis (weights in double: the 16 products per
+// output are then formed in double and rounded once).
+std::vector<CubicResizeTaps<double>> cubic_axis_taps(int64_t in, int64_t out, bool align_corners,
+                                                     double scale) {
+  std::vector<CubicResizeTaps<double>> t(static_cast<size_t>(out));
+  for (int64_t o = 0; o < out; ++o)
+    t[o] = resize_cubic_taps<double>(o, in, out, align_corners, scale);
+  return t;
+}
+
+// in {x [N,C,H,W]}, out {y [N,C,OH,OW]}; UpsampleParams. Parallel over output rows of all planes.
+void upsample_bicubic2d(const KernelArgs& a) {
+  CVD_ASSERT(a.in.size() == 1 && a.out.size() == 1 && a.params != nullptr);
+  const ResizeGeometry g = resize_geometry(a.in[0], a.out[0]);
+  const UpsampleParams& p = a.p<UpsampleParams>();
+  const auto th = cubic_axis_taps(g.h, g.oh, p.align_corners, p.scale_h);
+  const auto tw = cubic_axis_taps(g.w, g.ow, p.align_corners, p.scale_w);
+  const float* xp = a.in[0].data<float>();
+  float* yp = a.out[0].data<float>();
+  parallel_ranges(g.planes * g.oh, g.ow * 16, [&](int64_t b, int64_t e) {
+    for (int64_t t = b; t < e; ++t) {
+      const int64_t plane = t / g.oh, r = t % g.oh;
+      const float* x = xp + plane * g.h * g.w;
+      for (int64_t c = 0; c < g.ow; ++c) {
+        double acc = 0.0;
+        for (int i = 0; i < 4; ++i) {
+          const float* row = x + th[r].i[i] * g.w;
+          double s = 0.0;
+          for (int j = 0; j < 4; ++j) s += tw[c].w[j] * row[tw[c].i[j]];
+          acc += th[r].w[i] * s;
+        }
+        yp[t * g.ow + c] = static_cast<float>(acc);
+      }
+    }
+  });
+}
+
+// in {gy [N,C,OH,OW]}, out {gx [N,C,H,W]}; UpsampleParams. Race-free: each task owns whole
+// planes and scatters into them.
+void upsample_bicubic2d_backward(const KernelArgs& a) {
+  CVD_ASSERT(a.in.size() == 1 && a.out.size() == 1 && a.params != nullptr);
+  const ResizeGeometry g = resize_geometry(a.out[0], a.in[0]);
+  const UpsampleParams& p = a.p<UpsampleParams>();
+  const auto th = cubic_axis_taps(g.h, g.oh, p.align_corners, p.scale_h);
+  const auto tw = cubic_axis_taps(g.w, g.ow, p.align_corners, p.scale_w);
+  const float* gyp = a.in[0].data<float>();
+  float* gxp = a.out[0].data<float>();
+  parallel_ranges(g.planes, g.oh * g.ow * 16 + g.h * g.w, [&](int64_t b, int64_t e) {
+    std::vector<double> acc(static_cast<size_t>(g.h * g.w));
+    for (int64_t plane = b; plane < e; ++plane) {
+      std::fill(acc.begin(), acc.end(), 0.0);
+      const float* gy = gyp + plane * g.oh * g.ow;
+      for (int64_t r = 0; r < g.oh; ++r)
+        for (int64_t c = 0; c < g.ow; ++c) {
+          const double v = gy[r * g.ow + c];
+          for (int i = 0; i < 4; ++i)
+            for (int j = 0; j < 4; ++j)
+              acc[th[r].i[i] * g.w + tw[c].i[j]] += th[r].w[i] * tw[c].w[j] * v;
+        }
+      float* gx = gxp + plane * g.h * g.w;
+      for (int64_t k = 0; k < g.h * g.w; ++k) gx[k] = static_cast<float>(acc[k]);
+    }
+  });
+}
+
 }  // namespace
 
 void register_resize_kernels(KernelRegistry& r) {
+  r.add(OpId::upsample_bicubic2d, DeviceType::cpu, DType::f32, upsample_bicubic2d, "openmp");
+  r.add(OpId::upsample_bicubic2d_backward, DeviceType::cpu, DType::f32, upsample_bicubic2d_backward,
+        "openmp");
   r.add(OpId::upsample_bilinear2d, DeviceType::cpu, DType::f32, upsample_bilinear2d, "openmp");
   r.add(OpId::upsample_bilinear2d_backward, DeviceType::cpu, DType::f32,
         upsample_bilinear2d_backward, "openmp");

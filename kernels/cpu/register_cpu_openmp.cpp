@@ -12,6 +12,7 @@ void register_cpu_openmp_kernels(KernelRegistry& r) {
   cpu::register_resize_kernels(r);
   cpu::register_grid_sample_kernels(r);
   cpu::register_optimizer_kernels(r);
+  cpu::register_row_kernels(r);
 }
 
 }  // namespace cvd

@@ -166,6 +166,7 @@ void register_cuda_kernels(KernelRegistry& r) {
   cuda::register_cuda_layout(r);
   cuda::register_cuda_resample(r);
   cuda::register_cuda_norm_pool(r);
+  cuda::register_cuda_rows(r);
   cuda::register_cuda_conv(r);
   cuda::register_cuda_matmul(r);
   cuda::register_cuda_correlation(r);

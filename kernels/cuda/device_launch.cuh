@@ -28,6 +28,7 @@ void register_cuda_norm_pool(KernelRegistry& r);
 void register_cuda_conv(KernelRegistry& r);
 void register_cuda_matmul(KernelRegistry& r);
 void register_cuda_correlation(KernelRegistry& r);
+void register_cuda_rows(KernelRegistry& r);
 
 template <class Body>
 __global__ void run_body_kernel(int64_t n, Body body) {

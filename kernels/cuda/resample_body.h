@@ -1,5 +1,5 @@
-// CUDA kernel bodies and op drivers of resampling: bilinear resize (both align_corners modes) and
-// nearest resize, forward and backward, and bilinear grid_sample (zeros / border padding),
+// CUDA kernel bodies and op drivers of resampling: bilinear resize (both align_corners modes),
+// bicubic and nearest resize, forward and backward, and bilinear grid_sample (zeros / border padding),
 // forward and backward. PyTorch semantics; the taps are engine/elementwise_math.h, shared with
 // the CPU kernels. The resize backward kernels are gathers (one thread per input pixel visits the
 // output pixels whose taps reach it), so they need no atomics and are deterministic; the
@@ -208,6 +208,48 @@ struct GridSampleBackwardBody {
   }
 };
 
+// Bicubic resize: one thread per output pixel, 16 clamped taps (PyTorch upsample_bicubic2d).
+template <class T>
+struct BicubicResizeBody {
+  const T* x;
+  T* y;
+  ResizeGeometry g;
+  UpsampleParams p;
+  CVD_HOST_DEVICE void operator()(int64_t i) const {
+    const int64_t c = i % g.ow, r = (i / g.ow) % g.oh, pl = i / (g.ow * g.oh);
+    const CubicResizeTaps<T> th = resize_cubic_taps<T>(r, g.h, g.oh, p.align_corners, p.scale_h);
+    const CubicResizeTaps<T> tw = resize_cubic_taps<T>(c, g.w, g.ow, p.align_corners, p.scale_w);
+    const T* plane = x + pl * g.h * g.w;
+    T acc = T(0);
+    for (int a = 0; a < 4; ++a) {
+      T s = T(0);
+      for (int b = 0; b < 4; ++b) s += tw.w[b] * plane[th.i[a] * g.w + tw.i[b]];
+      acc += th.w[a] * s;
+    }
+    y[i] = acc;
+  }
+};
+
+// Bicubic backward: one thread per output pixel scatters its 16 weighted gradients into gx with
+// atomic_add (clamped taps make the adjoint's reach irregular; gx is zeroed first). The order of
+// the additions, and so the last bits, may differ between runs on a device.
+template <class T>
+struct BicubicResizeBackwardBody {
+  const T* gy;
+  T* gx;
+  ResizeGeometry g;
+  UpsampleParams p;
+  CVD_HOST_DEVICE void operator()(int64_t i) const {
+    const int64_t c = i % g.ow, r = (i / g.ow) % g.oh, pl = i / (g.ow * g.oh);
+    const CubicResizeTaps<T> th = resize_cubic_taps<T>(r, g.h, g.oh, p.align_corners, p.scale_h);
+    const CubicResizeTaps<T> tw = resize_cubic_taps<T>(c, g.w, g.ow, p.align_corners, p.scale_w);
+    T* plane = gx + pl * g.h * g.w;
+    for (int a = 0; a < 4; ++a)
+      for (int b = 0; b < 4; ++b)
+        atomic_add(plane + th.i[a] * g.w + tw.i[b], th.w[a] * tw.w[b] * gy[i]);
+  }
+};
+
 // ---- Op drivers ---------------------------------------------------------------------------------
 
 template <class Launch>
@@ -240,6 +282,28 @@ void upsample_nearest2d_backward_op(const KernelArgs& a) {
                                                               resize_geometry(gx, gy)});
 }
 
+template <class Launch>
+void upsample_bicubic2d_op(const KernelArgs& a) {
+  const Tensor &x = a.in[0], &y = a.out[0];
+  Launch::launch(y.numel(), BicubicResizeBody<float>{x.data<float>(), y.data<float>(),
+                                                     resize_geometry(x, y), a.p<UpsampleParams>()});
+}
+
+template <class T>
+struct ZeroBody {
+  T* p;
+  CVD_HOST_DEVICE void operator()(int64_t i) const { p[i] = T(0); }
+};
+
+template <class Launch>
+void upsample_bicubic2d_backward_op(const KernelArgs& a) {
+  const Tensor &gy = a.in[0], &gx = a.out[0];
+  Launch::launch(gx.numel(), ZeroBody<float>{gx.data<float>()});
+  Launch::launch(gy.numel(),
+                 BicubicResizeBackwardBody<float>{gy.data<float>(), gx.data<float>(),
+                                                  resize_geometry(gx, gy), a.p<UpsampleParams>()});
+}
+
 inline GridGeometry grid_geometry(const Tensor& x, const Tensor& y) {
   return {x.shape()[0], x.shape()[1], x.shape()[2], x.shape()[3], y.shape()[2], y.shape()[3]};
 }
@@ -252,12 +316,6 @@ void grid_sample_op(const KernelArgs& a) {
                  GridSampleBody<float>{x.data<float>(), grid.data<float>(), y.data<float>(),
                                        grid_geometry(x, y), p.padding, p.align_corners});
 }
-
-template <class T>
-struct ZeroBody {
-  T* p;
-  CVD_HOST_DEVICE void operator()(int64_t i) const { p[i] = T(0); }
-};
 
 template <class Launch>
 void grid_sample_backward_op(const KernelArgs& a) {

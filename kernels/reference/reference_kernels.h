@@ -39,11 +39,19 @@ void max_pool2d_backward(const KernelArgs& a);
 void avg_pool2d(const KernelArgs& a);
 void avg_pool2d_backward(const KernelArgs& a);
 
+// ---- Row normalisations over the last dimension (reference_rows.cpp) ----------------------------
+void layer_norm(const KernelArgs& a);
+void layer_norm_backward(const KernelArgs& a);
+void softmax(const KernelArgs& a);
+void softmax_backward(const KernelArgs& a);
+
 // ---- Resampling (reference_resample.cpp) -------------------------------------------------------
 void upsample_bilinear2d(const KernelArgs& a);
 void upsample_bilinear2d_backward(const KernelArgs& a);
 void upsample_nearest2d(const KernelArgs& a);
 void upsample_nearest2d_backward(const KernelArgs& a);
+void upsample_bicubic2d(const KernelArgs& a);
+void upsample_bicubic2d_backward(const KernelArgs& a);
 void grid_sample(const KernelArgs& a);
 void grid_sample_backward(const KernelArgs& a);
 

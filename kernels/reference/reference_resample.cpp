@@ -1,5 +1,5 @@
-// Reference kernels of resampling: bilinear and nearest upsampling (any output size, both
-// align_corners modes) and bilinear grid_sample (zeros / border padding), forward and backward,
+// Reference kernels of resampling: bilinear, bicubic and nearest upsampling (any output size,
+// both align_corners modes) and bilinear grid_sample (zeros / border padding), forward and backward,
 // PyTorch semantics. Each backward scatters through exactly the taps and weights of its forward.
 #include <algorithm>
 #include <cmath>
@@ -101,7 +101,53 @@ void nearest(const Tensor& x, const Tensor& y, bool backward) {
   }
 }
 
+// Bicubic resize (PyTorch upsample_bicubic2d, A = -0.75, taps clamped to the border) forward, or
+// its scatter back (in += taps^T out), plane by plane.
+void bicubic(const Tensor& x, const Tensor& y, const UpsampleParams& p, bool backward) {
+  const int64_t planes = resize_planes(x, y);
+  const int64_t h = x.shape()[2], w = x.shape()[3], oh = y.shape()[2], ow = y.shape()[3];
+  double* xp = x.data<double>();
+  double* yp = y.data<double>();
+  if (backward) {
+    for (int64_t i = 0; i < x.numel(); ++i) xp[i] = 0.0;
+  }
+  for (int64_t pl = 0; pl < planes; ++pl) {
+    double* xplane = xp + pl * h * w;
+    double* yplane = yp + pl * oh * ow;
+    for (int64_t r = 0; r < oh; ++r) {
+      const CubicResizeTaps<double> th =
+          resize_cubic_taps<double>(r, h, oh, p.align_corners, p.scale_h);
+      for (int64_t c = 0; c < ow; ++c) {
+        const CubicResizeTaps<double> tw =
+            resize_cubic_taps<double>(c, w, ow, p.align_corners, p.scale_w);
+        double& out = yplane[r * ow + c];
+        if (!backward) out = 0.0;
+        for (int i = 0; i < 4; ++i)
+          for (int j = 0; j < 4; ++j) {
+            double& in = xplane[th.i[i] * w + tw.i[j]];
+            if (backward)
+              in += th.w[i] * tw.w[j] * out;
+            else
+              out += th.w[i] * tw.w[j] * in;
+          }
+      }
+    }
+  }
+}
+
 }  // namespace
+
+// in {x [N,C,H,W]}, out {y [N,C,OH,OW]}; UpsampleParams.
+void upsample_bicubic2d(const KernelArgs& a) {
+  CVD_ASSERT(a.in.size() == 1 && a.out.size() == 1 && a.params != nullptr);
+  bicubic(a.in[0], a.out[0], a.p<UpsampleParams>(), false);
+}
+
+// in {gy [N,C,OH,OW]}, out {gx [N,C,H,W]}; UpsampleParams.
+void upsample_bicubic2d_backward(const KernelArgs& a) {
+  CVD_ASSERT(a.in.size() == 1 && a.out.size() == 1 && a.params != nullptr);
+  bicubic(a.out[0], a.in[0], a.p<UpsampleParams>(), true);
+}
 
 // in {x [N,C,H,W]}, out {y [N,C,OH,OW]}; UpsampleParams.
 void upsample_bilinear2d(const KernelArgs& a) {

@@ -21,6 +21,7 @@
 #include "models/depth_net_architectures.h"
 #include "pipeline/eval/eval_sparse.h"
 #include "pipeline/flow/user_masks.h"
+#include "pipeline/geometry/disparity_affine.h"
 #include "pipeline/geometry/flow_tracks.h"
 #include "pipeline/geometry/flow_triangulation.h"
 #include "pipeline/geometry/scale_calibration.h"
@@ -144,6 +145,55 @@ uint32_t cameras_crc32(const std::vector<FrameCamera>& cams) {
     crc = crc32(crc, reinterpret_cast<const Bytef*>(v), sizeof v);
   }
   return static_cast<uint32_t>(crc);
+}
+
+}  // namespace
+
+namespace {
+
+// Converted affine-invariant disparity networks (Depth Anything V2): a robust scale-and-shift fit
+// of the raw output (1 / the initial depth, which used no affine) to the sparse points' inverse
+// depths, set on the network; the initial depth maps are mapped the same way. Poses keep units.
+json calibrate_disparity_affine(DepthNet& net, std::vector<cv::Mat>& initial,
+                                const std::vector<SparseDepth>& sparse) {
+  std::vector<double> raw, depth;
+  for (size_t k = 0; k < initial.size() && k < sparse.size(); ++k) {
+    const cv::Mat& d = initial[k];
+    for (size_t i = 0; i < sparse[k].z.size(); ++i) {
+      const int x = static_cast<int>(std::lround(sparse[k].u[i]));
+      const int y = static_cast<int>(std::lround(sparse[k].v[i]));
+      if (x < 0 || y < 0 || x >= d.cols || y >= d.rows) continue;
+      const float nd = d.at<float>(y, x);
+      // 1e4: the depth of a raw output at or below the 1e-4 floor (no signal there).
+      if (nd > 0 && nd < 1e4f) {
+        raw.push_back(1.0 / nd);
+        depth.push_back(sparse[k].z[i]);
+      }
+    }
+  }
+  const DisparityAffineFit fit = fit_disparity_affine(raw, depth);
+  net.set_disparity_affine(fit.scale, fit.shift, fit.floor);
+  for (cv::Mat& d : initial)
+    for (int y = 0; y < d.rows; ++y)
+      for (int x = 0; x < d.cols; ++x) {
+        float& v = d.at<float>(y, x);
+        const double r = v > 0 ? 1.0 / v : 0.0;
+        v = static_cast<float>(1.0 / std::max(fit.scale * r + fit.shift, fit.floor));
+      }
+  if (fit.scale_only)
+    spdlog::warn(
+        "disparity calibration: the scale-and-shift fit was degenerate ({} samples); "
+        "fitted the scale only",
+        fit.samples);
+  return {{"method",
+           "affine-invariant disparity: robust fit 1/z = scale * output + shift to the sparse "
+           "points (Huber IRLS); poses keep their units"},
+          {"scale", fit.scale},
+          {"shift", fit.shift},
+          {"samples", fit.samples},
+          {"inliers", fit.inliers},
+          {"residual_mad", fit.residual_mad},
+          {"scale_only", fit.scale_only}};
 }
 
 }  // namespace
@@ -309,7 +359,9 @@ RunResult run_pipeline(const RunOptions& o) {
         "keep their units";
   }
   std::vector<cv::Mat> initial = infer_depths(*net, load_frame, n, dsize, o, "initial depth");
-  if (!o.model.empty()) {
+  if (!o.model.empty() && depth_net_architecture(net->arch()).affine_disparity) {
+    calib = calibrate_disparity_affine(*net, initial, sparse);
+  } else if (!o.model.empty()) {
     ScaleCalibrationResult sc = calibrate_scale(cams, initial, points);
     CVD_CHECK(sc.num_valid() > 0, "scale calibration: no frame has enough sparse points");
     cams = sc.cameras;

@@ -13,7 +13,7 @@ namespace cvd {
 
 namespace {
 
-enum class LayerKind { conv, conv_transpose, batch_norm, linear };
+enum class LayerKind { conv, conv_transpose, batch_norm, linear, layer_norm };
 
 const char* graph_kind_name(LayerKind k) {
   switch (k) {
@@ -25,6 +25,8 @@ const char* graph_kind_name(LayerKind k) {
       return "BatchNormalization";
     case LayerKind::linear:
       return "Gemm/MatMul";
+    case LayerKind::layer_norm:
+      return "LayerNormalization";
   }
   return "?";
 }
@@ -39,6 +41,8 @@ const char* model_kind_name(LayerKind k) {
       return "BatchNorm2d";
     case LayerKind::linear:
       return "Linear";
+    case LayerKind::layer_norm:
+      return "LayerNorm";
   }
   return "?";
 }
@@ -120,8 +124,18 @@ class GraphWeights {
           constants_[n.outputs[0]] = a->t.get();
       } else if (n.op_type == "Identity" && !n.inputs.empty() && !n.outputs.empty()) {
         alias_[n.outputs[0]] = n.inputs[0];
+      } else if (n.op_type == "Transpose" && n.inputs.size() == 1 && !n.outputs.empty()) {
+        // A 2-d weight transposed by the graph (torch.onnx's Linear without constant folding).
+        const std::vector<int64_t> perm = n.ints_attribute("perm");
+        if (perm.empty() || perm == std::vector<int64_t>{1, 0})
+          transposed_[n.outputs[0]] = n.inputs[0];
       }
     }
+  }
+  // The value `value` is the graph's transpose of; empty when it is not a Transpose output.
+  std::string transpose_source(const std::string& value) const {
+    auto t = transposed_.find(value);
+    return t == transposed_.end() ? std::string() : t->second;
   }
   GraphTensor resolve(const std::string& role, const std::string& value) const {
     GraphTensor t{role, value};
@@ -149,6 +163,7 @@ class GraphWeights {
   const OnnxGraph& g_;
   std::map<std::string, const OnnxTensor*> constants_;
   std::map<std::string, std::string> alias_;
+  std::map<std::string, std::string> transposed_;
 };
 
 std::vector<GraphLayer> graph_layers(const OnnxGraph& g) {
@@ -177,13 +192,23 @@ std::vector<GraphLayer> graph_layers(const OnnxGraph& g) {
       l.kind = LayerKind::linear;
       transpose = n.int_attribute("transB", 0) == 0;
       roles = {{"weight", input(1)}, {"bias", input(2)}};
+    } else if (n.op_type == "LayerNormalization") {
+      l.kind = LayerKind::layer_norm;
+      roles = {{"weight", input(1)}, {"bias", input(2)}};
     } else if (n.op_type == "MatMul") {
-      // x @ W with a stored W [in, out]; a following Add of a stored vector is the bias.
-      GraphTensor w = weights.resolve("weight", input(1));
+      // x @ W with a stored W [in, out] (or Transpose(W) of a stored W [out, in]); a following
+      // Add of a stored vector is the bias.
+      std::string w_value = input(1);
+      transpose = true;
+      if (const std::string src = weights.transpose_source(w_value);
+          !src.empty() && weights.resolve("weight", src).tensor) {
+        w_value = src;
+        transpose = false;
+      }
+      GraphTensor w = weights.resolve("weight", w_value);
       if (!w.tensor) continue;  // a product of two computed values: no weights
       l.kind = LayerKind::linear;
-      transpose = true;
-      roles = {{"weight", input(1)}};
+      roles = {{"weight", w_value}};
       if (!n.outputs.empty() && consumers[n.outputs[0]].size() == 1) {
         const OnnxNode* add = consumers[n.outputs[0]][0];
         if (add->op_type == "Add" && add->inputs.size() == 2) {
@@ -221,6 +246,8 @@ void model_layers(const Module& net, const std::vector<std::string>& execution_o
       l.kind = LayerKind::batch_norm;
     else if (dynamic_cast<const Linear*>(m))
       l.kind = LayerKind::linear;
+    else if (dynamic_cast<const LayerNorm*>(m))
+      l.kind = LayerKind::layer_norm;
     else
       continue;
     for (const auto& [role, t] : m->local_parameters()) l.tensors.emplace_back(role, t);
@@ -280,6 +307,15 @@ void check_attributes(const GraphLayer& g, const ModelLayer& m,
     const auto& o = ct->options();
     check("strides", pair_attr("strides"), {o.stride_h, o.stride_w});
     check("group", {n.int_attribute("group", 1), 1}, {o.groups, 1});
+  } else if (const auto* ln = dynamic_cast<const LayerNorm*>(m.module)) {
+    const double eps = n.float_attribute("epsilon", 1e-5f);
+    if (std::abs(eps - ln->eps()) > 1e-6 * ln->eps())
+      problems.push_back(
+          fmt::format("{}: epsilon {:g} in the graph, {:g} in the network layer '{}'", g.where, eps,
+                      ln->eps(), m.prefix));
+    if (n.int_attribute("axis", -1) != -1)
+      problems.push_back(fmt::format("{}: axis {} (the network normalises the last axis only)",
+                                     g.where, n.int_attribute("axis", -1)));
   } else if (const auto* bn = dynamic_cast<const BatchNorm2d*>(m.module)) {
     const double eps = n.float_attribute("epsilon", 1e-5f);
     if (std::abs(eps - bn->options().eps) > 1e-6 * bn->options().eps)
@@ -390,19 +426,51 @@ void resize_warnings(const OnnxModel& model, const DepthNet& net, OnnxConversion
 }  // namespace
 
 const std::set<std::string>& onnx_supported_ops() {
-  static const std::set<std::string> ops = {"Conv",     "ConvTranspose", "BatchNormalization",
-                                            "Relu",     "Clip",          "LeakyRelu",
-                                            "Sigmoid",  "Tanh",          "Add",
-                                            "Sub",      "Mul",           "Div",
-                                            "Concat",   "Resize",        "Upsample",
-                                            "MaxPool",  "AveragePool",   "Pad",
-                                            "Reshape",  "Squeeze",       "Unsqueeze",
-                                            "Gemm",     "MatMul",        "Identity",
-                                            "Constant", "Shape",         "Gather",
-                                            "Cast",     "Slice",         "ConstantOfShape",
-                                            "Exp",      "Log",           "Sqrt",
-                                            "Pow",      "ReduceMean",    "Transpose",
-                                            "Flatten"};
+  static const std::set<std::string> ops = {"Conv",
+                                            "ConvTranspose",
+                                            "BatchNormalization",
+                                            "Relu",
+                                            "Clip",
+                                            "LeakyRelu",
+                                            "Sigmoid",
+                                            "Tanh",
+                                            "Add",
+                                            "Sub",
+                                            "Mul",
+                                            "Div",
+                                            "Concat",
+                                            "Resize",
+                                            "Upsample",
+                                            "MaxPool",
+                                            "AveragePool",
+                                            "Pad",
+                                            "Reshape",
+                                            "Squeeze",
+                                            "Unsqueeze",
+                                            "Gemm",
+                                            "MatMul",
+                                            "Identity",
+                                            "Constant",
+                                            "Shape",
+                                            "Gather",
+                                            "Cast",
+                                            "Slice",
+                                            "ConstantOfShape",
+                                            "Exp",
+                                            "Log",
+                                            "Sqrt",
+                                            "Pow",
+                                            "ReduceMean",
+                                            "Transpose",
+                                            "Flatten",
+                                            "LayerNormalization",
+                                            "Softmax",
+                                            "Erf",
+                                            "Expand",
+                                            "Split",
+                                            "Range",
+                                            "Equal",
+                                            "Where"};
   return ops;
 }
 
@@ -437,6 +505,7 @@ OnnxConversionReport load_onnx_weights(const OnnxModel& model, DepthNet& net) {
   OnnxNetworkSpec spec;
   spec.arch = net.arch();
   spec.execution_order = net.execution_order();
+  spec.unused_in_forward = net.unused_in_forward();
   OnnxConversionReport report = load_onnx_weights(model, net, spec);
   resize_warnings(model, net, report);
   return report;
@@ -556,6 +625,45 @@ OnnxConversionReport load_onnx_weights(const OnnxModel& model, Module& net,
   std::map<std::string, Tensor> state;
   for (size_t gi = 0; gi < graph.size(); ++gi)
     if (graph_to_model[gi] >= 0) match_layer(graph[gi], used[graph_to_model[gi]], state, problems);
+
+  // 6. Parameters outside the weight layers, by name.
+  std::set<std::string> in_layers;
+  for (const auto* side : {&used, &unused})
+    for (const ModelLayer& l : *side)
+      for (const auto& [role, t] : l.tensors) in_layers.insert(l.state_name(role));
+  auto never_read = [&](const std::string& name) {
+    for (const std::string& u : spec.unused_in_forward)
+      if (name == u || name.rfind(u + ".", 0) == 0) return true;
+    return false;
+  };
+  for (const auto& [name, t] : net.named_parameters()) {
+    if (in_layers.count(name)) continue;
+    if (never_read(name)) {
+      report.unused_in_forward.push_back(name);
+      continue;
+    }
+    const OnnxTensor* init = model.graph.initializer(name);
+    if (!init) {
+      problems.push_back(fmt::format(
+          "network tensor '{}' has no initializer of that name in the graph (export with "
+          "do_constant_folding=False keeps the state names)",
+          name));
+      continue;
+    }
+    if (!init->values.defined()) {
+      problems.push_back(fmt::format("initializer '{}' has data type {} (only FLOAT and DOUBLE)",
+                                     name, onnx_data_type_name(init->data_type)));
+      continue;
+    }
+    const std::vector<int64_t> vs(init->values.shape().begin(), init->values.shape().end());
+    if (vs != model_shape(t)) {
+      problems.push_back(fmt::format("initializer '{}' has shape {} but the network's has {}", name,
+                                     shape_text(vs), shape_text(model_shape(t))));
+      continue;
+    }
+    state[name] = init->values;
+    ++report.by_name_tensors;
+  }
 
   if (!problems.empty()) {
     constexpr size_t kMaxListed = 100;

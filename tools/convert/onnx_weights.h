@@ -9,6 +9,9 @@
 //      them with training=TrainingMode.TRAINING and do_constant_folding=False);
 //   2. by structure, for the rest: the i-th remaining graph layer is the i-th remaining network
 //      layer in execution order (DepthNet::execution_order).
+// LayerNormalization (opset 17) matches LayerNorm. Parameters outside these layers (a ViT's class
+// token, position embedding, LayerScale gammas) are taken by name only, from initializers of the
+// same name; those the forward never reads (DepthNet::unused_in_forward) are left as they are.
 // Every shape, layer kind, BatchNorm epsilon and conv group / stride / dilation is checked. A
 // BatchNormalization whose scale / B are constants of 1 / 0 (PyTorch's export of affine=False)
 // matches a BatchNorm2d without affine parameters.
@@ -35,10 +38,11 @@
 namespace cvd {
 
 struct OnnxConversionReport {
-  size_t layers = 0;        // weight layers matched
-  size_t by_name = 0;       // layers matched by initializer names
-  size_t by_structure = 0;  // layers matched by graph position
-  size_t tensors = 0;       // tensors copied into the network
+  size_t layers = 0;           // weight layers matched
+  size_t by_name = 0;          // layers matched by initializer names
+  size_t by_structure = 0;     // layers matched by graph position
+  size_t tensors = 0;          // tensors copied into the network
+  size_t by_name_tensors = 0;  // parameters outside weight layers, taken by initializer name
   // Network tensors its forward never uses (DepthNet::execution_order), left as initialised.
   std::vector<std::string> unused_in_forward;
   std::vector<std::string> warnings;     // e.g. Resize modes that differ from the network's
@@ -51,6 +55,8 @@ struct OnnxNetworkSpec {
   std::string arch;  // for messages
   // Module prefixes in the order the graph runs them (DepthNet::execution_order semantics).
   std::vector<std::string> execution_order{""};
+  // State names or module prefixes the forward never reads (DepthNet::unused_in_forward).
+  std::vector<std::string> unused_in_forward;
   // The custom-domain ops (domain, op type) the network implements; others are unsupported.
   std::set<std::pair<std::string, std::string>> custom_ops;
   // Checks the graph's network-specific nodes (e.g. custom-op attributes): each problem is a

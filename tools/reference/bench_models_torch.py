@@ -19,12 +19,15 @@ import time
 import torch
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+import depth_anything_v2_model  # noqa: E402
 import mannequin_model  # noqa: E402
 import midas_models  # noqa: E402
 from cvdw_writer import read_cvdw  # noqa: E402
 
 
 def build(arch):
+    if arch == "depth_anything_v2":
+        return depth_anything_v2_model.DepthAnythingV2(depth_anything_v2_model.VITS)
     if arch == "midas_v2":
         return midas_models.MidasV2(1.0)
     if arch == "midas_small":
@@ -35,6 +38,8 @@ def build(arch):
 def raw_output(arch, model, rgb):
     if arch == "mannequin":
         return model(rgb)[0]
+    if arch == "depth_anything_v2":
+        return model(midas_models.imagenet_normalize(rgb))
     return model(midas_models.imagenet_normalize(rgb)).unsqueeze(1)
 
 
@@ -95,7 +100,7 @@ def loss_direction(d_i, d_j, cam, lam):
 
 
 def geometric_loss(arch, depth, pairs):
-    lam = 0.1 if arch == "mannequin" else 1e-4
+    lam = 0.1 if arch == "mannequin" else 1e-4  # depth_anything_v2: MiDaS's (provisional)
     total = 0
     for i, j, ij, ji in pairs:
         d_i, d_j = depth[i, 0], depth[j, 0]
@@ -104,14 +109,24 @@ def geometric_loss(arch, depth, pairs):
 
 
 def forward_gmac(arch, model, h, w):
-    """Multiply-accumulates of convolutions of one forward per image (what docs/models.md section 8 counts)."""
+    """Multiply-accumulates of convolutions (and of the ViT's linear layers and attention
+    products) of one forward per image (what docs/models.md section 8 counts)."""
     macs = [0]
 
     def hook(m, inp, out):
-        k = m.weight.shape[1] * m.weight.shape[2] * m.weight.shape[3]
-        macs[0] += out.numel() * k
+        if isinstance(m, torch.nn.Linear):
+            macs[0] += out.numel() * m.in_features
+        elif isinstance(m, torch.nn.ConvTranspose2d):
+            macs[0] += inp[0].numel() * m.weight.shape[1] * m.weight.shape[2] * m.weight.shape[3]
+        elif isinstance(m, depth_anything_v2_model.Attention):
+            b, n, c = inp[0].shape
+            macs[0] += 2 * b * n * n * c  # q k^T and attn v
+        else:
+            k = m.weight.shape[1] * m.weight.shape[2] * m.weight.shape[3]
+            macs[0] += out.numel() * k
 
-    hs = [m.register_forward_hook(hook) for m in model.modules() if isinstance(m, torch.nn.Conv2d)]
+    kinds = (torch.nn.Conv2d, torch.nn.Linear, torch.nn.ConvTranspose2d, depth_anything_v2_model.Attention)
+    hs = [m.register_forward_hook(hook) for m in model.modules() if isinstance(m, kinds)]
     model.eval()
     with torch.no_grad():
         raw_output(arch, model, torch.rand(1, 3, h, w))

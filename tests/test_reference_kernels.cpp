@@ -110,6 +110,7 @@ struct ParsedParams {
   BatchNormParams bn;
   Pool2dParams pool;
   UpsampleParams upsample;
+  LayerNormParams layer_norm;
   MatmulParams matmul;
   GridSampleParams grid;
   AdamParams adam;
@@ -199,7 +200,12 @@ void parse_params(const std::string& kernel, const json& j, ParsedParams& p) {
     p.ptr = &p.pool;
   } else if (kernel.rfind("upsample_", 0) == 0) {
     p.upsample.align_corners = j.value("align_corners", false);
+    p.upsample.scale_h = j.value("scale_h", 0.0);
+    p.upsample.scale_w = j.value("scale_w", 0.0);
     p.ptr = &p.upsample;
+  } else if (kernel.rfind("layer_norm", 0) == 0) {
+    p.layer_norm.eps = j.at("eps");
+    p.ptr = &p.layer_norm;
   } else if (kernel == "matmul") {
     p.matmul = {j.at("trans_a"), j.at("trans_b")};
     p.ptr = &p.matmul;

@@ -421,6 +421,55 @@ def gen_resample():
 
 
 # ---- optimisers ---------------------------------------------------------------------------------
+def gen_transformer():
+    """Bicubic resize (sizes, and DINOv2's scale factors), layer norm and softmax."""
+    for xs, size, scales, ac in (((1, 2, 3, 4), (5, 7), None, False), ((1, 2, 5, 4), (3, 3), None, False),
+                                 ((1, 1, 4, 3), (7, 5), None, True), ((1, 2, 1, 1), (3, 2), None, False),
+                                 ((1, 3, 4, 4), (5, 3), (5.1 / 4, 3.1 / 4), False)):
+        # Not here: an unchanged size with scale factors. torch 1.13's bicubic forward then still
+        # resamples with the factors, but its backward copies the gradient through (a same-size
+        # shortcut), so its two halves disagree; cvd's backward is the forward's adjoint (checked
+        # by finite differences in the op table: bicubic_same_size_scaled). DINOv2 never asks for
+        # it (a grid of the embedding's size on a square input uses the embedding as is).
+        x0 = randn(*xs)
+        (x,) = leaves(x0)
+        if scales is None:
+            y = F.interpolate(x, size=size, mode="bicubic", align_corners=ac)
+            p = {"align_corners": ac}
+        else:
+            y = F.interpolate(x, scale_factor=scales, mode="bicubic", align_corners=ac)
+            assert tuple(y.shape[2:]) == size
+            p = {"align_corners": ac, "scale_h": scales[0], "scale_w": scales[1]}
+        gy = randn(*y.shape)
+        (gx,) = grads(y, [x], gy)
+        name = "%dx%d_to_%dx%d_ac%d%s" % (xs[2], xs[3], size[0], size[1], ac, "_scaled" if scales else "")
+        add("upsample_bicubic2d_" + name, "upsample_bicubic2d", p, [enc(x0)], [enc(y)])
+        add("upsample_bicubic2d_backward_" + name, "upsample_bicubic2d_backward", p, [enc(gy)], [enc(gx)])
+
+    for xs in ((3, 7), (2, 4, 5), (4, 1)):
+        x0, w0, b0 = randn(*xs, scale=2.0), uniform(0.5, 1.5, xs[-1]), randn(xs[-1])
+        x, w, b = leaves(x0, w0, b0)
+        y, mean, rstd = torch.native_layer_norm(x, [xs[-1]], w, b, 1e-6)
+        gy = randn(*y.shape)
+        gx, gw, gb = grads(y, [x, w, b], gy)
+        rows = mean.numel()
+        name = "x".join(str(d) for d in xs)
+        p = {"eps": 1e-6}
+        add("layer_norm_" + name, "layer_norm", p, [enc(x0), enc(w0), enc(b0)],
+            [enc(y), enc(mean.reshape(rows)), enc(rstd.reshape(rows))])
+        add("layer_norm_backward_" + name, "layer_norm_backward", p,
+            [enc(gy), enc(x0), enc(w0), enc(mean.reshape(rows).detach()), enc(rstd.reshape(rows).detach())],
+            [enc(gx), enc(gw), enc(gb)])
+
+        z0 = randn(*xs, scale=3.0)
+        (z,) = leaves(z0)
+        s = torch.softmax(z, dim=-1)
+        gs = randn(*s.shape)
+        (gz,) = grads(s, [z], gs)
+        add("softmax_" + name, "softmax", {}, [enc(z0)], [enc(s)])
+        add("softmax_backward_" + name, "softmax_backward", {}, [enc(gs), enc(s.detach())], [enc(gz)])
+
+
 def gen_optim():
     for wd in (0.0, 0.1):
         p0 = randn(3, 4)
@@ -484,6 +533,7 @@ def main():
     gen_batch_norm()
     gen_pool()
     gen_resample()
+    gen_transformer()
     gen_optim()
     doc = {"generator": "tools/reference/gen_op_fixtures.py", "torch": torch.__version__,
            "cases": CASES}

@@ -11,6 +11,7 @@
 #include "engine/cvdw.h"
 #include "engine/ops.h"
 #include "models/depth_anything_v2.h"
+#include "tests/depth_anything_test_config.h"
 #include "tests/test_support.h"
 #include "tools/convert/onnx_graph.h"
 #include "tools/convert/onnx_weights.h"
@@ -20,27 +21,12 @@ namespace {
 
 const std::filesystem::path kDir = test::source_dir() / "tests/data/onnx";
 
-DepthAnythingConfig reduced_config(const nlohmann::json& j) {
-  DepthAnythingConfig c;
-  c.vit.embed_dim = j.at("embed_dim");
-  c.vit.depth = j.at("depth");
-  c.vit.heads = j.at("heads");
-  c.vit.mlp_ratio = j.at("mlp_ratio");
-  c.vit.patch = j.at("patch");
-  c.vit.pos_grid = j.at("pos_grid");
-  c.features = j.at("features");
-  for (int i = 0; i < 4; ++i) {
-    c.out_channels[i] = j.at("out_channels")[i];
-    c.layers[i] = j.at("layers")[i];
-  }
-  return c;
-}
-
 TEST(ConvertDepthAnything, TinyExportConvertsAndReproducesPyTorch) {
   CvdwReader expected(kDir / "depth_anything_v2_tiny.expected.cvdw");
   const OnnxModel model = read_onnx(kDir / "depth_anything_v2_tiny.onnx");
   Generator gen(3);
-  DepthAnythingV2Net net(reduced_config(expected.header().config.at("dav2_config")), gen);
+  DepthAnythingV2Net net(
+      test::depth_anything_config_from(expected.header().config.at("dav2_config")), gen);
   const OnnxConversionReport r = load_onnx_weights(model, net);
   EXPECT_GT(r.layers, 20u);
   EXPECT_EQ(r.by_name_tensors, 2u + 2 * 4u) << "cls_token, pos_embed and 2 gammas per block";

@@ -25,6 +25,7 @@
 #include "models/depth_anything_v2.h"
 #include "models/depth_net_architectures.h"
 #include "models/depth_net_state.h"
+#include "tests/depth_anything_test_config.h"
 #include "tests/test_support.h"
 
 namespace cvd {
@@ -48,28 +49,13 @@ double max_abs_diff(const Tensor& a, const Tensor& b) {
   return m;
 }
 
-DepthAnythingConfig config_from(const nlohmann::json& j) {
-  DepthAnythingConfig c;
-  c.vit.embed_dim = j.at("embed_dim");
-  c.vit.depth = j.at("depth");
-  c.vit.heads = j.at("heads");
-  c.vit.mlp_ratio = j.at("mlp_ratio");
-  c.vit.patch = j.at("patch");
-  c.vit.pos_grid = j.at("pos_grid");
-  c.features = j.at("features");
-  for (int i = 0; i < 4; ++i) {
-    c.out_channels[i] = j.at("out_channels")[i];
-    c.layers[i] = j.at("layers")[i];
-  }
-  return c;
-}
-
 struct Fixture {
   CvdwReader reader{kFixture};
   nlohmann::json config = reader.header().config;
   std::unique_ptr<DepthAnythingV2Net> net() const {
     Generator gen(5);
-    auto n = std::make_unique<DepthAnythingV2Net>(config_from(config.at("dav2_config")), gen);
+    auto n = std::make_unique<DepthAnythingV2Net>(
+        test::depth_anything_config_from(config.at("dav2_config")), gen);
     std::map<std::string, Tensor> state;
     for (const auto& e : reader.header().tensors)
       if (e.name.rfind("param/", 0) == 0) state.emplace(e.name.substr(6), reader.tensor(e.name));

@@ -1,5 +1,6 @@
 // One run per output folder (pipeline/io/output_lock.h): a second lock on the folder fails at
-// once naming the holder, and a lock whose process died does not block.
+// once naming the holder, and a lock whose process died does not block; what a killed writer
+// left behind is swept (pipeline/io/atomic_file.h).
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -8,6 +9,7 @@
 #include <thread>
 
 #include "engine/error.h"
+#include "pipeline/io/atomic_file.h"
 #include "pipeline/io/output_lock.h"
 #include "test_support.h"
 
@@ -48,6 +50,32 @@ TEST(OutputLock, SecondLockFailsNamingTheHolderAndADeadHolderDoesNotBlock) {
   // Released on destruction: locking twice in a row works.
   { OutputFolderLock a(dir.path()); }
   EXPECT_NO_THROW(OutputFolderLock b(dir.path()));
+}
+
+TEST(AtomicFile, TemporariesOfOtherProcessesAreSweptAndNothingElse) {
+  namespace fs = std::filesystem;
+  test::TempDir dir;
+  fs::create_directories(dir.path() / "cache" / "flow");
+  auto touch = [](const fs::path& p) { write_text_file(p, "x"); };
+  // Left by a killed process (pid 1 is never this test): a json, a png, one without extension.
+  touch(dir.path() / "cache" / "flow" / ".000000_000001.tmp-1-7.json");
+  touch(dir.path() / ".frame.tmp-1-0.png");
+  touch(dir.path() / ".run.tmp-1-3");
+  // Not temporaries, or this process's own: kept.
+  const fs::path own = temporary_path_for(dir.path() / "mine.json");
+  touch(own);
+  touch(dir.path() / "cache" / "flow" / "000000_000001.json");
+  touch(dir.path() / ".hidden");
+  touch(dir.path() / ".notes.tmp-abc-1.txt");
+  EXPECT_EQ(remove_stale_temporaries(dir.path()), 3u);
+  EXPECT_FALSE(fs::exists(dir.path() / "cache" / "flow" / ".000000_000001.tmp-1-7.json"));
+  EXPECT_FALSE(fs::exists(dir.path() / ".frame.tmp-1-0.png"));
+  EXPECT_FALSE(fs::exists(dir.path() / ".run.tmp-1-3"));
+  EXPECT_TRUE(fs::exists(own));
+  EXPECT_TRUE(fs::exists(dir.path() / "cache" / "flow" / "000000_000001.json"));
+  EXPECT_TRUE(fs::exists(dir.path() / ".hidden"));
+  EXPECT_TRUE(fs::exists(dir.path() / ".notes.tmp-abc-1.txt"));
+  EXPECT_EQ(remove_stale_temporaries(dir.path() / "missing"), 0u);
 }
 
 }  // namespace

@@ -262,13 +262,24 @@ TEST_F(TinyClip, RefinedCamerasContinueFromTheCheckpointToTheSameResult) {
   EXPECT_LE(worst, 1e-5) << "largest relative depth difference continued vs uninterrupted";
 }
 
-// Flow pairs finished in `out`: each pair's .json is written last (atomically).
+// Flow pairs finished in `out`: each pair's .json is written last (atomically); a dot-named
+// .json is a temporary still being written (or left by a kill), not a finished pair.
 std::map<std::string, fs::file_time_type> finished_flow_pairs(const fs::path& out) {
   std::map<std::string, fs::file_time_type> done;
   std::error_code ec;
-  for (const auto& e : fs::directory_iterator(out / "cache" / "flow", ec))
-    if (e.path().extension() == ".json") done[e.path().filename().string()] = e.last_write_time();
+  for (const auto& e : fs::directory_iterator(out / "cache" / "flow", ec)) {
+    const std::string name = e.path().filename().string();
+    if (e.path().extension() == ".json" && name[0] != '.') done[name] = e.last_write_time();
+  }
   return done;
+}
+
+// Dot-named temporaries anywhere under `out` (pipeline/io/atomic_file.h).
+int temporaries_under(const fs::path& out) {
+  int n = 0;
+  for (const auto& e : fs::recursive_directory_iterator(out))
+    if (e.is_regular_file() && e.path().filename().string().find(".tmp-") != std::string::npos) ++n;
+  return n;
 }
 
 class FlowClip : public ::testing::Test {
@@ -339,6 +350,7 @@ TEST_F(FlowClip, KilledDuringFlowResumesToTheSameFlowAndDepth) {
   ASSERT_EQ(r.exit_code, 0) << r.output;
   auto after = finished_flow_pairs(out);
   EXPECT_EQ(after.size(), total);
+  EXPECT_EQ(temporaries_under(out), 0) << "an unfinished file of the killed run was left behind";
   for (const auto& [name, time] : before) {
     ASSERT_TRUE(after.count(name)) << name;
     EXPECT_EQ(after[name], time) << name << " was recomputed instead of resumed";

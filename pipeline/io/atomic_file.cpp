@@ -4,7 +4,9 @@
 
 #include <atomic>
 #include <fstream>
+#include <regex>
 #include <string>
+#include <vector>
 
 #include "engine/error.h"
 
@@ -16,6 +18,24 @@ std::filesystem::path temporary_path_for(const std::filesystem::path& target) {
                            std::to_string(static_cast<long>(::getpid())) + "-" +
                            std::to_string(counter.fetch_add(1)) + target.extension().string();
   return target.parent_path() / name;
+}
+
+size_t remove_stale_temporaries(const std::filesystem::path& root) {
+  namespace fs = std::filesystem;
+  static const std::regex name(R"(^\..*\.tmp-([0-9]+)-[0-9]+(\.[^.]*)?$)");
+  const std::string own = std::to_string(static_cast<long>(::getpid()));
+  std::error_code ec;
+  std::vector<fs::path> stale;
+  for (auto it = fs::recursive_directory_iterator(root, ec); !ec && it != fs::end(it);
+       it.increment(ec)) {
+    if (!it->is_regular_file(ec)) continue;
+    std::smatch m;
+    const std::string file = it->path().filename().string();
+    if (std::regex_match(file, m, name) && m[1].str() != own) stale.push_back(it->path());
+  }
+  size_t removed = 0;
+  for (const fs::path& p : stale) removed += fs::remove(p, ec) ? 1 : 0;
+  return removed;
 }
 
 void write_atomically(const std::filesystem::path& target,

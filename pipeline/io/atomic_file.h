@@ -17,6 +17,11 @@ std::filesystem::path temporary_path_for(const std::filesystem::path& target);
 void write_atomically(const std::filesystem::path& target,
                       const std::function<void(const std::filesystem::path& tmp)>& write);
 
+// Removes the temporaries a killed process left under `root` (recursively): files named like
+// temporary_path_for() names them whose process id is not this process's. Call it only while
+// holding the folder's OutputFolderLock, so no other live writer owns them. Returns the count.
+size_t remove_stale_temporaries(const std::filesystem::path& root);
+
 // Writes `content` to `target` atomically. Throws Error(io) naming the file on failure.
 void write_text_file(const std::filesystem::path& target, std::string_view content);
 

@@ -233,7 +233,13 @@ RunResult run_pipeline(const RunOptions& o) {
   // final output; the others read the caches it wrote.
   ProcessGroup& pg = process_group();
   std::optional<OutputFolderLock> lock;
-  if (pg.rank() == 0) lock.emplace(o.out);
+  if (pg.rank() == 0) {
+    lock.emplace(o.out);
+    // A run killed while writing leaves dot-named temporaries; they are never read, only swept.
+    if (size_t n = remove_stale_temporaries(o.out))
+      spdlog::info("{}: removed {} unfinished file(s) left by an interrupted run", o.out.string(),
+                   n);
+  }
   if (pg.size() > 1) spdlog::info("{}: rank {} of {}", pg.name(), pg.rank(), pg.size());
   fs::path cache = o.out / "cache";
   json info = {

@@ -9,6 +9,7 @@
 #include "engine/dispatch.h"
 #include "engine/error.h"
 #include "engine/kernel_params.h"
+#include "engine/row_math.h"
 #include "kernels/cpu/cpu_openmp_families.h"
 #include "kernels/cpu/cpu_parallel.h"
 
@@ -39,29 +40,13 @@ void layer_norm(const KernelArgs& a) {
         *invstd = a.out[2].data<float>();
   const double eps = a.p<LayerNormParams>().eps;
   parallel_ranges(g.rows, 4 * g.cols, [&](int64_t b, int64_t e) {
-    for (int64_t r = b; r < e; ++r) {
-      const float* xr = x + r * g.cols;
-      double m = 0.0;
-      for (int64_t c = 0; c < g.cols; ++c) m += xr[c];
-      m /= static_cast<double>(g.cols);
-      double v = 0.0;
-      for (int64_t c = 0; c < g.cols; ++c) v += (xr[c] - m) * (xr[c] - m);
-      v /= static_cast<double>(g.cols);
-      const float mf = static_cast<float>(m), s = static_cast<float>(1.0 / std::sqrt(v + eps));
-      mean[r] = mf;
-      invstd[r] = s;
-      float* yr = y + r * g.cols;
-      for (int64_t c = 0; c < g.cols; ++c) {
-        float n = (xr[c] - mf) * s;
-        if (gamma) n *= gamma[c];
-        if (beta) n += beta[c];
-        yr[c] = n;
-      }
-    }
+    for (int64_t r = b; r < e; ++r)
+      layer_norm_row(x + r * g.cols, gamma, beta, g.cols, eps, y + r * g.cols, mean + r,
+                     invstd + r);
   });
 }
 
-// in {gy, x, gamma?, mean, invstd}, out {gx?, ggamma?, gbeta?} (reference_rows.cpp has the math).
+// in {gy, x, gamma?, mean, invstd}, out {gx?, ggamma?, gbeta?}; gx per row: engine/row_math.h.
 void layer_norm_backward(const KernelArgs& a) {
   CVD_ASSERT(a.in.size() == 5 && a.out.size() == 3);
   const Rows g = rows_of(a.in[1]);
@@ -76,29 +61,17 @@ void layer_norm_backward(const KernelArgs& a) {
       parallel_ranges_indexed(g.rows, 8 * g.cols, max_ranges, [&](int t, int64_t b, int64_t e) {
         double* pg = partial.empty() ? nullptr : partial.data() + t * 2 * g.cols;
         double* pb = pg ? pg + g.cols : nullptr;
-        const double inv_c = 1.0 / static_cast<double>(g.cols);
         for (int64_t r = b; r < e; ++r) {
           const float *gyr = gy + r * g.cols, *xr = x + r * g.cols;
-          const float m = mean[r], s = invstd[r];
-          double sum_g = 0.0, sum_gn = 0.0;
-          for (int64_t c = 0; c < g.cols; ++c) {
-            const double n = static_cast<double>((xr[c] - m) * s);
-            const double gc = static_cast<double>(gyr[c]) * (gamma ? gamma[c] : 1.0f);
-            sum_g += gc;
-            sum_gn += gc * n;
-            if (pg) {
-              pg[c] += gyr[c] * n;
+          if (pg) {
+            const float m = mean[r], s = invstd[r];
+            for (int64_t c = 0; c < g.cols; ++c) {
+              pg[c] += gyr[c] * static_cast<double>((xr[c] - m) * s);
               pb[c] += gyr[c];
             }
           }
-          if (!gx) continue;
-          float* gxr = gx + r * g.cols;
-          const double mg = sum_g * inv_c, mgn = sum_gn * inv_c;
-          for (int64_t c = 0; c < g.cols; ++c) {
-            const double n = static_cast<double>((xr[c] - m) * s);
-            const double gc = static_cast<double>(gyr[c]) * (gamma ? gamma[c] : 1.0f);
-            gxr[c] = static_cast<float>(s * (gc - mg - n * mgn));
-          }
+          if (gx)
+            layer_norm_backward_row(gyr, xr, gamma, mean[r], invstd[r], g.cols, gx + r * g.cols);
         }
       });
   for (int64_t c = 0; c < g.cols; ++c) {

@@ -9,6 +9,7 @@
 
 #include "engine/dispatch.h"
 #include "engine/kernel_params.h"
+#include "engine/row_math.h"
 #include "kernels/cuda/launch_body.h"
 
 namespace cvd::cuda {
@@ -29,48 +30,19 @@ struct LayerNormBody {
   RowGeometry g;
   double eps;
   CVD_HOST_DEVICE void operator()(int64_t r) const {
-    using std::sqrt;
-    const T* xr = x + r * g.cols;
-    double m = 0.0;
-    for (int64_t c = 0; c < g.cols; ++c) m += xr[c];
-    m /= static_cast<double>(g.cols);
-    double v = 0.0;
-    for (int64_t c = 0; c < g.cols; ++c) v += (xr[c] - m) * (xr[c] - m);
-    v /= static_cast<double>(g.cols);
-    const T mf = static_cast<T>(m), s = static_cast<T>(1.0 / sqrt(v + eps));
-    mean[r] = mf;
-    invstd[r] = s;
-    for (int64_t c = 0; c < g.cols; ++c) {
-      T n = (xr[c] - mf) * s;
-      if (gamma) n *= gamma[c];
-      if (beta) n += beta[c];
-      y[r * g.cols + c] = n;
-    }
+    layer_norm_row(x + r * g.cols, gamma, beta, g.cols, eps, y + r * g.cols, mean + r, invstd + r);
   }
 };
 
-// gx of one row: invstd * (g - mean(g) - n * mean(g n)), g = gy * gamma.
+// gx of one row (engine/row_math.h).
 template <class T>
 struct LayerNormBackwardRowBody {
   const T *gy, *x, *gamma, *mean, *invstd;
   T* gx;
   RowGeometry g;
   CVD_HOST_DEVICE void operator()(int64_t r) const {
-    const T *gyr = gy + r * g.cols, *xr = x + r * g.cols;
-    const T m = mean[r], s = invstd[r];
-    double sum_g = 0.0, sum_gn = 0.0;
-    for (int64_t c = 0; c < g.cols; ++c) {
-      const double n = static_cast<double>((xr[c] - m) * s);
-      const double gc = static_cast<double>(gyr[c]) * (gamma ? gamma[c] : T(1));
-      sum_g += gc;
-      sum_gn += gc * n;
-    }
-    const double mg = sum_g / g.cols, mgn = sum_gn / g.cols;
-    for (int64_t c = 0; c < g.cols; ++c) {
-      const double n = static_cast<double>((xr[c] - m) * s);
-      const double gc = static_cast<double>(gyr[c]) * (gamma ? gamma[c] : T(1));
-      gx[r * g.cols + c] = static_cast<T>(s * (gc - mg - n * mgn));
-    }
+    layer_norm_backward_row(gy + r * g.cols, x + r * g.cols, gamma, mean[r], invstd[r], g.cols,
+                            gx + r * g.cols);
   }
 };
 

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "engine/kernel_params.h"
+#include "engine/row_math.h"
 #include "kernels/reference/reference_access.h"
 #include "kernels/reference/reference_kernels.h"
 
@@ -34,29 +35,12 @@ void layer_norm(const KernelArgs& a) {
   double *y = a.out[0].data<double>(), *mean = a.out[1].data<double>(),
          *invstd = a.out[2].data<double>();
   const double eps = a.p<LayerNormParams>().eps;
-  for (int64_t r = 0; r < g.rows; ++r) {
-    const double* xr = x + r * g.cols;
-    double m = 0.0;
-    for (int64_t c = 0; c < g.cols; ++c) m += xr[c];
-    m /= static_cast<double>(g.cols);
-    double v = 0.0;
-    for (int64_t c = 0; c < g.cols; ++c) v += (xr[c] - m) * (xr[c] - m);
-    v /= static_cast<double>(g.cols);
-    const double s = 1.0 / std::sqrt(v + eps);
-    mean[r] = m;
-    invstd[r] = s;
-    for (int64_t c = 0; c < g.cols; ++c) {
-      double n = (xr[c] - m) * s;
-      if (gamma) n *= gamma[c];
-      if (beta) n += beta[c];
-      y[r * g.cols + c] = n;
-    }
-  }
+  for (int64_t r = 0; r < g.rows; ++r)
+    layer_norm_row(x + r * g.cols, gamma, beta, g.cols, eps, y + r * g.cols, mean + r, invstd + r);
 }
 
-// in {gy, x, gamma?, mean, invstd}, out {gx?, ggamma?, gbeta?}. With n = (x - mean) * invstd and
-// g = gy * gamma: gx = invstd * (g - mean_c(g) - n * mean_c(g * n)); ggamma = sum_rows gy * n;
-// gbeta = sum_rows gy.
+// in {gy, x, gamma?, mean, invstd}, out {gx?, ggamma?, gbeta?}. gx per row: engine/row_math.h;
+// with n = (x - mean) * invstd, ggamma = sum_rows gy * n and gbeta = sum_rows gy.
 void layer_norm_backward(const KernelArgs& a) {
   CVD_ASSERT(a.in.size() == 5 && a.out.size() == 3);
   const Rows g = rows_of(a.in[1]);
@@ -72,22 +56,11 @@ void layer_norm_backward(const KernelArgs& a) {
   }
   for (int64_t r = 0; r < g.rows; ++r) {
     const double *gyr = gy + r * g.cols, *xr = x + r * g.cols;
-    double sum_g = 0.0, sum_gn = 0.0;
     for (int64_t c = 0; c < g.cols; ++c) {
-      const double n = (xr[c] - mean[r]) * invstd[r];
-      const double gc = gyr[c] * (gamma ? gamma[c] : 1.0);
-      sum_g += gc;
-      sum_gn += gc * n;
-      if (gg) gg[c] += gyr[c] * n;
+      if (gg) gg[c] += gyr[c] * (xr[c] - mean[r]) * invstd[r];
       if (gb) gb[c] += gyr[c];
     }
-    if (!gx) continue;
-    const double inv_c = 1.0 / static_cast<double>(g.cols);
-    for (int64_t c = 0; c < g.cols; ++c) {
-      const double n = (xr[c] - mean[r]) * invstd[r];
-      const double gc = gyr[c] * (gamma ? gamma[c] : 1.0);
-      gx[r * g.cols + c] = invstd[r] * (gc - sum_g * inv_c - n * sum_gn * inv_c);
-    }
+    if (gx) layer_norm_backward_row(gyr, xr, gamma, mean[r], invstd[r], g.cols, gx + r * g.cols);
   }
 }
 

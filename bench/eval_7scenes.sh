@@ -74,7 +74,9 @@ for poses in $POSES; do
   rpe=$(jq -r 'if .pose and (.pose.rpe | length) > 0 then ([.pose.rpe[0], .pose.rpe[-1]] |
     map("\(.rot_mean_deg * 1000 | round / 1000) deg @\(.delta)") | join(", ")) else "-" end' "$final")
   registered=$(jq -r '.frame_stats.registered' "$run/run.json")
-  label="$poses ($registered/$FRAMES frames, ATE ${ate} cm, RPE rot ${rpe}, ${secs} s)"
+  # Peak resident memory of cvd itself (run.json; absent from runs of older builds).
+  rss=$(jq -r 'if .peak_rss_mb then ", peak RSS \(.peak_rss_mb.process | round) MB" else "" end' "$run/run.json")
+  label="$poses ($registered/$FRAMES frames, ATE ${ate} cm, RPE rot ${rpe}, ${secs} s${rss})"
   row() {  # label, what, metrics file
     jq -r --arg l "$1" --arg w "$2" '[$l, $w,
       (.depth.median_frame.depth.abs_rel | . * 1000 | round / 1000 | tostring),

@@ -1,6 +1,7 @@
 #include "pipeline/run/run_pipeline.h"
 
 #include <spdlog/spdlog.h>
+#include <sys/resource.h>
 
 #include <zlib.h>
 #include <algorithm>
@@ -561,6 +562,13 @@ RunResult run_pipeline(const RunOptions& o) {
                       {"geometric_loss_before", res.initial_loss},
                       {"geometric_loss_after", res.final_loss}};
   info["timings_s"] = timings;
+  // Peak resident memory of this process and of the largest subprocess (COLMAP, ffmpeg) so far;
+  // a resumed run reports its own.
+  rusage self{}, children{};
+  getrusage(RUSAGE_SELF, &self);
+  getrusage(RUSAGE_CHILDREN, &children);
+  info["peak_rss_mb"] = {{"process", static_cast<double>(self.ru_maxrss) / 1024.0},
+                         {"largest_subprocess", static_cast<double>(children.ru_maxrss) / 1024.0}};
   res.run_info = info;
   write_text_file(o.out / "run.json", info.dump(2));
   partial_outputs.commit();

@@ -26,6 +26,7 @@
 #include "pipeline/flow/flow_pair.h"
 #include "pipeline/geometry/camera.h"
 #include "pipeline/io/frame_source.h"
+#include "pipeline/run/quality_preset.h"
 #include "pipeline/run/run_pipeline.h"
 #include "pipeline/run/run_stages.h"
 

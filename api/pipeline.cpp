@@ -109,6 +109,14 @@ class TemporaryDirectory {
 
 }  // namespace
 
+void apply_quality_preset(PipelineOptions& options, const std::string& preset) {
+  const QualityPreset& q = quality_preset(preset);
+  options.depth_long_side = q.depth_long_side;
+  options.width = q.width;
+  options.epochs = q.epochs;
+  options.warmup_steps = q.warmup_steps;
+}
+
 Pipeline::Pipeline(PipelineOptions options) : options_(std::move(options)) {}
 
 PipelineResult Pipeline::run() {

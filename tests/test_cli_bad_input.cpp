@@ -189,6 +189,13 @@ std::vector<BadInputCase> cases() {
        },
        3,
        {"--intrinsics '-60,60,31.5,23.5'", "must be positive"}},
+      {"unknown_quality_preset",
+       [](const TempDir& t) {
+         return run_args(t, write_frames(t / "frames", 3), "--quality ultra");
+       },
+       2,
+       {"--quality", "ultra", "fast,default,best"},
+       {"out"}},
       {"intrinsics_three_numbers",
        [](const TempDir& t) {
          return run_args(t, write_frames(t / "frames", 3), "--intrinsics 60,60,31.5");

@@ -1,8 +1,12 @@
-// What the command line tells a user before any run: every --help shows each flag's default, and
+// What the command line tells a user before any run: every --help shows each flag's default (the
+// cost knobs: the --quality preset's), and
 // --version lists the backends and the libraries and programs found.
 #include <gtest/gtest.h>
 
+#include <fmt/format.h>
+
 #include "pipeline/poses/colmap_runner.h"
+#include "pipeline/run/quality_preset.h"
 #include "test_support.h"
 
 namespace cvd {
@@ -13,9 +17,15 @@ using test::run_cvd;
 TEST(CliHelp, RunHelpShowsEveryDefault) {
   const test::CommandResult r = run_cvd("run --help");
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  for (const char* shown :
-       {"--epochs INT=20", "--depth-size INT=384", "--width FLOAT=0.25", "--warmup INT=200",
-        "=mannequin", "--formats", "=[pfm,png16,color]", "mannequin 0.0004"})
+  // The cost knobs show the "default" quality preset's values.
+  const QualityPreset& q = quality_preset("default");
+  for (const std::string& shown :
+       {fmt::format("--epochs INT={}", q.epochs),
+        fmt::format("--depth-size INT={}", q.depth_long_side),
+        fmt::format("--width FLOAT={:g}", q.width), fmt::format("--warmup INT={}", q.warmup_steps),
+        std::string("--quality TEXT:{fast,default,best}=default"), std::string("=mannequin"),
+        std::string("--formats"), std::string("=[pfm,png16,color]"),
+        std::string("mannequin 0.0004")})
     EXPECT_NE(r.output.find(shown), std::string::npos) << shown << " missing in:\n" << r.output;
 }
 

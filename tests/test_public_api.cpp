@@ -223,6 +223,37 @@ TEST(PublicApi, PipelineRejectsUnknownSettingsBeforeCreatingAnything) {
   }
 }
 
+TEST(PublicApi, QualityPresetsSetTheCostKnobsAndDefaultIsTheDefaults) {
+  const cvd::PipelineOptions defaults;
+  cvd::PipelineOptions o;
+  o.seed = 7;
+  cvd::apply_quality_preset(o, "default");
+  EXPECT_EQ(o.depth_long_side, defaults.depth_long_side);
+  EXPECT_EQ(o.width, defaults.width);
+  EXPECT_EQ(o.epochs, defaults.epochs);
+  EXPECT_EQ(o.warmup_steps, defaults.warmup_steps);
+  EXPECT_EQ(o.seed, 7u) << "a preset touches only its four fields";
+  cvd::PipelineOptions fast, best;
+  cvd::apply_quality_preset(fast, "fast");
+  cvd::apply_quality_preset(best, "best");
+  // Each step up costs no less in any knob it sets, and more in all together.
+  EXPECT_LT(fast.depth_long_side, o.depth_long_side);
+  EXPECT_LE(o.depth_long_side, best.depth_long_side);
+  EXPECT_LE(fast.width, o.width);
+  EXPECT_LE(o.width, best.width);
+  EXPECT_LT(fast.epochs, o.epochs);
+  EXPECT_LE(o.epochs, best.epochs);
+  EXPECT_LT(o.epochs * o.depth_long_side * o.depth_long_side * o.width * o.width,
+            best.epochs * best.depth_long_side * best.depth_long_side * best.width * best.width);
+  try {
+    cvd::apply_quality_preset(o, "ultra");
+    ADD_FAILURE() << "an unknown preset was accepted";
+  } catch (const cvd::Error& e) {
+    EXPECT_EQ(e.category(), cvd::ErrorCategory::invalid_argument);
+    EXPECT_NE(std::string(e.what()).find("ultra"), std::string::npos) << e.what();
+  }
+}
+
 TEST(PublicApi, PipelineStopsWithCancelledWhenTheFlagIsSet) {
   const fs::path dir = fresh_dir("cancel");
   cvd::PipelineOptions o = short_run(dir, 4);

@@ -32,16 +32,19 @@ struct PipelineOptions {
   std::string out;
 
   // Frames
-  int max_frames = 0;         ///< --max-frames (0 = all)
-  int frame_step = 1;         ///< --frame-step
-  int first_frame = 0;        ///< --first-frame
-  int depth_long_side = 384;  ///< --depth-size: network resolution (aligned to the model)
+  int max_frames = 0;   ///< --max-frames (0 = all)
+  int frame_step = 1;   ///< --frame-step
+  int first_frame = 0;  ///< --first-frame
+  // The cost knobs (depth_long_side, width, epochs, warmup_steps) start at the "default" quality
+  // preset; apply_quality_preset() sets them to another.
+  int depth_long_side = 256;  ///< --depth-size: network resolution (aligned to the model)
   int flow_long_side = 1024;  ///< --flow-size: flow resolution (never upscaled)
 
   // Depth network
-  std::string model;               ///< --model: .cvdw; empty = the default untrained network
-  std::string arch = "mannequin";  ///< --arch: mannequin | midas_small | midas_v2 | depth_anything_v2
-  double width = 0.25;             ///< --width: width multiplier of the default network
+  std::string model;  ///< --model: .cvdw; empty = the default untrained network
+  std::string arch =
+      "mannequin";       ///< --arch: mannequin | midas_small | midas_v2 | depth_anything_v2
+  double width = 0.125;  ///< --width: width multiplier of the default network
 
   // Poses
   std::string poses_file;                      ///< --poses: poses file instead of running COLMAP
@@ -70,12 +73,12 @@ struct PipelineOptions {
   float fb_threshold_px = 1.0f;       ///< --fb-threshold
 
   // Training (<= 0: the architecture's default)
-  int epochs = 20;               ///< --epochs
+  int epochs = 16;               ///< --epochs
   int batch_pairs = 4;           ///< --batch
   double lr = 0;                 ///< --lr
   double lambda_disparity = -1;  ///< --lambda
   std::uint64_t seed = 1;        ///< --seed
-  int warmup_steps = 200;        ///< --warmup
+  int warmup_steps = 100;        ///< --warmup
   /// --refine-poses: "none", "rotation" or "full" (rotations and centres), refined with the depth
   /// through the geometric loss; the results carry the refined cameras
   std::string refine_poses = "none";
@@ -113,6 +116,12 @@ struct PipelineResult {
   std::string metrics_json;   ///< evaluation (when gt was given), JSON text
   std::string run_info_json;  ///< what OUT/run.json holds (OUT = PipelineOptions::out), JSON text
 };
+
+/// `--quality`: sets the four fields that decide what a run costs (depth_long_side, width, epochs,
+/// warmup_steps) to a preset's values: "fast", "default" (PipelineOptions' own defaults) or "best"
+/// (the README's "Quality presets" says what each costs and gives). Other fields are untouched.
+/// Throws Error(ErrorCategory::invalid_argument) for another name.
+CVD_API void apply_quality_preset(PipelineOptions& options, const std::string& preset);
 
 /// Runs the pipeline described by its options.
 class CVD_API Pipeline {

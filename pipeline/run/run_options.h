@@ -27,13 +27,14 @@ struct RunOptions {
 
   // Frames
   int max_frames = 0, frame_step = 1, first_frame = 0;
-  int depth_long_side = 384;  // network resolution (aligned to the model)
+  // The four cost knobs start at the "default" --quality preset (pipeline/run/quality_preset.h).
+  int depth_long_side = 256;  // network resolution (aligned to the model)
   int flow_long_side = 1024;  // flow resolution (never upscaled)
 
   // Depth network: a converted .cvdw, or the default untrained architecture.
   std::filesystem::path model;  // empty = default network with no pretrained weights
   std::string arch = "mannequin";
-  double width = 0.25;  // width multiplier of the default network
+  double width = 0.125;  // width multiplier of the default network
 
   // Poses: "colmap" (run SfM) or a file in `poses_format`.
   std::filesystem::path poses_file;
@@ -63,12 +64,12 @@ struct RunOptions {
   float fb_threshold_px = 1.0f;
 
   // Training (defaults per architecture when <= 0)
-  int epochs = 20;
+  int epochs = 16;
   int batch_pairs = 4;
   double lr = 0;
   double lambda_disparity = -1;
   uint64_t seed = 1;
-  int warmup_steps = 200;  // default network only: fit sparse SfM depth first
+  int warmup_steps = 100;  // default network only: fit sparse SfM depth first
   // Refine the cameras through the geometric loss while training
   // (pipeline/training/camera_refinement.h): refine_poses "none", "rotation" (rotations only) or
   // "full" (rotations and centres); refine_focal the focal length.

@@ -127,8 +127,10 @@ int run_cli(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    int rc = app.exit(e);
-    return rc == 0 ? 0 : kExitUsage;
+    // --help and --version print and succeed; a bad command line reads like every other error.
+    if (e.get_exit_code() == 0) return app.exit(e);
+    std::fprintf(stderr, "cvd: error: %s\nRun with --help for more information.\n", e.what());
+    return kExitUsage;
   } catch (const cvd::Error& e) {
     return failed(exit_code_for(e.category()), std::string("error: ") + e.what());
   } catch (const std::filesystem::filesystem_error& e) {

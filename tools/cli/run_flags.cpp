@@ -8,6 +8,7 @@
 #include "engine/error.h"
 #include "engine/process_group.h"
 #include "models/depth_net_architectures.h"
+#include "pipeline/run/quality_preset.h"
 #include "tools/cli/command.h"
 
 namespace cvd::cli {
@@ -16,8 +17,22 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s) {
   c->add_option("--max-frames", o.max_frames, "Use at most this many frames (0 = all)");
   c->add_option("--frame-step", o.frame_step, "Use every n-th frame")->check(CLI::PositiveNumber);
   c->add_option("--first-frame", o.first_frame, "Skip frames before this index");
-  c->add_option("--depth-size", o.depth_long_side,
-                "Long side of the depth maps (aligned to the model)");
+  std::string presets;
+  std::vector<std::string> preset_names;
+  for (const QualityPreset& p : quality_presets()) {
+    presets += fmt::format("{}{}: {}", presets.empty() ? "" : "; ", p.name, p.summary);
+    preset_names.push_back(p.name);
+  }
+  s.quality_flag =
+      c->add_option(
+           "--quality", s.quality,
+           "Cost preset setting --depth-size, --width, --epochs and --warmup (each flag given "
+           "overrides it): " +
+               presets)
+          ->check(CLI::IsMember(preset_names))
+          ->capture_default_str();
+  s.depth_size = c->add_option("--depth-size", o.depth_long_side,
+                               "Long side of the depth maps (aligned to the model)");
   c->add_option("--flow-size", o.flow_long_side,
                 "Long side of the frames used for flow (never upscaled)");
   c->add_option(
@@ -25,7 +40,7 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s) {
       "Converted depth network (.cvdw, see `cvd convert`); default: an untrained network");
   c->add_option("--arch", o.arch, "Architecture of the default network")
       ->check(CLI::IsMember(cvd::depth_net_archs()));
-  c->add_option("--width", o.width, "Width multiplier of the default network");
+  s.width = c->add_option("--width", o.width, "Width multiplier of the default network");
   c->add_option("--poses", o.poses_file, "Camera poses file instead of running COLMAP");
   c->add_option("--poses-format", o.poses_format, "Format of --poses")
       ->check(CLI::IsMember({"tum", "colmap", "kitti"}));
@@ -72,7 +87,7 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s) {
   c->add_option("--min-valid", o.min_valid_fraction,
                 "Drop pairs keeping fewer consistent pixels than this fraction");
   c->add_option("--fb-threshold", o.fb_threshold_px, "Forward-backward consistency threshold (px)");
-  c->add_option("--epochs", o.epochs, "Training epochs");
+  s.epochs = c->add_option("--epochs", o.epochs, "Training epochs");
   c->add_option("--batch", o.batch_pairs, "Frame pairs per training step")
       ->check(CLI::PositiveNumber);
   // The per-architecture defaults, from the architecture table.
@@ -86,7 +101,8 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s) {
   c->add_option("--lambda", o.lambda_disparity,
                 "Weight of the disparity term; < 0: per architecture (" + lambda_defaults + ")");
   c->add_option("--seed", o.seed, "Random seed");
-  c->add_option("--warmup", o.warmup_steps, "Sparse-depth warm-up steps of the default network");
+  s.warmup = c->add_option("--warmup", o.warmup_steps,
+                           "Sparse-depth warm-up steps of the default network");
   c->add_option("--refine-poses", o.refine_poses,
                 "Refine the cameras with the depth through the geometric loss: none, rotation, or "
                 "full (rotations and centres); the first camera stays fixed and the outputs carry "
@@ -108,6 +124,12 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s) {
 }
 
 void apply_flag_strings(const RunFlagStrings& s, RunOptions& o) {
+  const QualityPreset& q = quality_preset(s.quality);
+  auto given = [](const CLI::Option* opt) { return opt && opt->count() > 0; };
+  if (!given(s.depth_size)) o.depth_long_side = q.depth_long_side;
+  if (!given(s.width)) o.width = q.width;
+  if (!given(s.epochs)) o.epochs = q.epochs;
+  if (!given(s.warmup)) o.warmup_steps = q.warmup_steps;
   if (s.intrinsics.empty()) return;
   std::stringstream ss(s.intrinsics);
   std::vector<double> v;

@@ -9,12 +9,17 @@
 namespace cvd::cli {
 
 struct RunFlagStrings {
-  std::string intrinsics;  // "fx,fy,cx,cy"
+  std::string intrinsics;           // "fx,fy,cx,cy"
+  std::string quality = "default";  // --quality preset
+  // The knobs a preset sets; a flag given on the command line keeps its value.
+  CLI::Option *depth_size = nullptr, *width = nullptr, *epochs = nullptr, *warmup = nullptr,
+              *quality_flag = nullptr;
 };
 
 // Adds the pipeline flags (everything but input/output) to `cmd`.
 void add_pipeline_flags(CLI::App* cmd, RunOptions& o, RunFlagStrings& s);
-// Applies parsed string flags (e.g. --intrinsics) to `o`; throws cvd::Error on bad values.
+// Applies parsed string flags (--intrinsics, the --quality preset to the knobs not given) to `o`;
+// throws cvd::Error on bad values.
 void apply_flag_strings(const RunFlagStrings& s, RunOptions& o);
 // Logging level from the global -q / -v flags.
 void configure_logging();

@@ -67,6 +67,9 @@ TEST(AtomicFile, TemporariesOfOtherProcessesAreSweptAndNothingElse) {
   touch(dir.path() / "cache" / "flow" / "000000_000001.json");
   touch(dir.path() / ".hidden");
   touch(dir.path() / ".notes.tmp-abc-1.txt");
+  touch(dir.path() / ".notes.tmp-1-.txt");
+  touch(dir.path() / ".notes.tmp-1-2.tar.gz");
+  touch(dir.path() / "notes.tmp-1-2.txt");
   EXPECT_EQ(remove_stale_temporaries(dir.path()), 3u);
   EXPECT_FALSE(fs::exists(dir.path() / "cache" / "flow" / ".000000_000001.tmp-1-7.json"));
   EXPECT_FALSE(fs::exists(dir.path() / ".frame.tmp-1-0.png"));
@@ -74,7 +77,9 @@ TEST(AtomicFile, TemporariesOfOtherProcessesAreSweptAndNothingElse) {
   EXPECT_TRUE(fs::exists(own));
   EXPECT_TRUE(fs::exists(dir.path() / "cache" / "flow" / "000000_000001.json"));
   EXPECT_TRUE(fs::exists(dir.path() / ".hidden"));
-  EXPECT_TRUE(fs::exists(dir.path() / ".notes.tmp-abc-1.txt"));
+  for (const char* kept :
+       {".notes.tmp-abc-1.txt", ".notes.tmp-1-.txt", ".notes.tmp-1-2.tar.gz", "notes.tmp-1-2.txt"})
+    EXPECT_TRUE(fs::exists(dir.path() / kept)) << kept;
   EXPECT_EQ(remove_stale_temporaries(dir.path() / "missing"), 0u);
 }
 

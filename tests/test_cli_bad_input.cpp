@@ -333,6 +333,19 @@ std::vector<BadInputCase> cases() {
        3,
        {"onnx_shape_overflow.onnx", "impossibly large shape"},
        {"converted.cvdw"}},
+      {"onnx_fuzz_regression_zero_dim_stride_overflow",
+       [](const TempDir& t) {
+         // Found by the 1 M-execution run of tests/fuzz/fuzz_onnx under UBSan: a shape with a zero
+         // dimension passed the element-count bound while its other dimensions overflowed the
+         // strides (signed overflow in contiguous_strides).
+         return "convert " +
+                q(source_dir() /
+                  "tests/data/fuzz_regressions/onnx_zero_dim_stride_overflow.onnx") +
+                " --arch mannequin --width 0.0625 -o " + q(t / "converted.cvdw");
+       },
+       3,
+       {"onnx_zero_dim_stride_overflow.onnx", "impossibly large shape"},
+       {"converted.cvdw"}},
       {"onnx_fuzz_regression_empty_packed_floats",
        [](const TempDir& t) {
          // Found by tests/fuzz/fuzz_onnx under UBSan: an empty packed float_data field made the

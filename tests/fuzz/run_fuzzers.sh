@@ -5,7 +5,9 @@
 # $BUILD/crashes/<target>/ (turn each into a regression case in a test).
 #
 #   tests/fuzz/run_fuzzers.sh [SECONDS] [TARGET...]
-#   env: BUILD (default build-fuzz), CXX (default clang++), JOBS (default 2)
+#   env: BUILD (default build-fuzz), CXX (default clang++), JOBS (default 2),
+#        RUNS (when set, each target runs until RUNS executions instead of SECONDS; the long
+#        run of the README is RUNS=1000000)
 set -euo pipefail
 SECONDS_PER_TARGET=${1:-20}
 shift || true
@@ -107,16 +109,25 @@ P
 status=0
 for t in "${TARGETS[@]}"; do
   mkdir -p "$BUILD/corpus/$t" "$BUILD/crashes/$t"
-  echo "== fuzz_$t for ${SECONDS_PER_TARGET}s"
+  limit=(-max_total_time="$SECONDS_PER_TARGET")
+  if [ -n "${RUNS:-}" ]; then
+    limit=(-runs="$RUNS")
+    echo "== fuzz_$t for $RUNS executions"
+  else
+    echo "== fuzz_$t for ${SECONDS_PER_TARGET}s"
+  fi
+  started=$(date +%s)
   if ! (cd "$BUILD/crashes/$t" && UBSAN_OPTIONS=print_stacktrace=1 \
         ASAN_OPTIONS=detect_leaks=1:allocator_may_return_null=1 \
-        "$BUILD/fuzz_$t" -max_total_time="$SECONDS_PER_TARGET" -max_len=65536 -rss_limit_mb=4096 \
+        "$BUILD/fuzz_$t" "${limit[@]}" -max_len=65536 -rss_limit_mb=4096 \
         -timeout=10 -print_final_stats=1 "$BUILD/corpus/$t" "$S/$t" > "$BUILD/fuzz_$t.log" 2>&1); then
     echo "!! fuzz_$t found a crash: see $BUILD/fuzz_$t.log and $BUILD/crashes/$t/"
     grep -m5 -E "ERROR|SUMMARY|threw" "$BUILD/fuzz_$t.log" || true
     status=1
   else
     grep -E "stat::number_of_executed_units|cov:" "$BUILD/fuzz_$t.log" | tail -2
+    echo "   fuzz_$t: $(grep -oE 'stat::number_of_executed_units: *[0-9]+' "$BUILD/fuzz_$t.log" |
+      grep -oE '[0-9]+$') executions in $(( $(date +%s) - started )) s, corpus $(ls "$BUILD/corpus/$t" | wc -l) inputs"
   fi
 done
 rm -rf /tmp/cvd-fuzz-*

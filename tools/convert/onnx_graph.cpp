@@ -289,12 +289,15 @@ OnnxTensor read_tensor(WireReader r) {
          "onnx.save_model(m, 'inline.onnx', save_as_external_data=False)",
          r.file().string(), t.name, location.empty() ? "" : fmt::format(" in '{}'", location));
   // Bound the element count before using it (a corrupt shape must not overflow int64 or size an
-  // allocation: found by tests/fuzz/fuzz_onnx).
-  int64_t n = 1;
+  // allocation: found by tests/fuzz/fuzz_onnx). The product of the non-zero dimensions is bounded
+  // too: with a zero dimension the count is 0, but the strides still multiply the others (found
+  // by the 1 M-execution fuzz run, tests/data/fuzz_regressions/onnx_zero_dim_stride_overflow.onnx).
+  int64_t n = 1, nonzero = 1;
   for (int64_t d : t.dims) {
-    if (d != 0 && n > std::numeric_limits<int64_t>::max() / 16 / d)
+    if (d != 0 && nonzero > std::numeric_limits<int64_t>::max() / 16 / d)
       r.corrupt(fmt::format("tensor '{}' has an impossibly large shape [{}]", t.name,
                             fmt::join(t.dims, ", ")));
+    if (d != 0) nonzero *= d;
     n *= d;
   }
   const auto count_error = [&](size_t got, const char* field) {

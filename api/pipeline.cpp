@@ -33,6 +33,7 @@ RunOptions to_run_options(const PipelineOptions& p) {
   o.colmap_max_features = p.colmap_max_features;
   o.masks = p.masks;
   o.colmap_keyframes = p.colmap_keyframes;
+  o.poses_source = p.poses_source;
   o.sparse_points = p.sparse_points;
   o.pair_storage = p.pair_storage;
   o.flow = p.flow;

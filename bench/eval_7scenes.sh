@@ -10,8 +10,10 @@
 # usage: bench/eval_7scenes.sh [path/to/cvd] [output dir]
 # environment (defaults sized for a 2-core machine, ~30 min in all):
 #   FRAMES=40 FRAME_STEP=1 DEPTH_SIZE=192 WIDTH=0.125 EPOCHS=4 WARMUP=60
+#   INTRINSICS=525,525,320,240 (empty: estimated; ground-truth-pose runs then need --fov, skipped)
 #   MODEL=weights.cvdw ARCH=mannequin|midas_small|midas_v2 (converted pretrained weights, optional)
-#   POSES="gt colmap" (which runs; suffixes: "+all" gives COLMAP's mapper every frame
+#   POSES="gt colmap" (which runs: gt, colmap, flow (cameras from optical flow, --poses-source
+#   flow); suffixes: "+all" gives COLMAP's mapper every frame
 #   (--colmap-keyframes all) instead of keyframes; "+colmappts" (gt only) triangulates the sparse
 #   points with COLMAP on the given poses (--sparse-points colmap); "+refine", last, adds
 #   --refine-poses $REFINE (default full) and reuses the cache of the run without it, so both start from the same poses
@@ -28,7 +30,10 @@ command -v jq >/dev/null || { echo "eval_7scenes.sh: needs jq (apt-get install j
 FRAMES="${FRAMES:-40}" FRAME_STEP="${FRAME_STEP:-1}" DEPTH_SIZE="${DEPTH_SIZE:-192}"
 WIDTH="${WIDTH:-0.125}" EPOCHS="${EPOCHS:-4}" WARMUP="${WARMUP:-60}" POSES="${POSES:-gt colmap}"
 common=(--max-frames "$FRAMES" --frame-step "$FRAME_STEP" --depth-size "$DEPTH_SIZE"
-  --epochs "$EPOCHS" --intrinsics 525,525,320,240 --gt "$data" --no-videos)
+  --epochs "$EPOCHS" --gt "$data" --no-videos)
+# INTRINSICS= (empty) leaves the focal to the pipeline's estimate (the run then needs no --intrinsics).
+INTRINSICS="${INTRINSICS-525,525,320,240}"
+[[ -n "$INTRINSICS" ]] && common+=(--intrinsics "$INTRINSICS")
 if [[ -n "${MODEL:-}" ]]; then
   common+=(--model "$MODEL" --arch "${ARCH:?ARCH must name the architecture of MODEL}")
 else
@@ -57,6 +62,8 @@ for poses in $POSES; do
   fi
   if [[ ${base%%+*} == gt ]]; then
     extra+=(--poses "$data/groundtruth_rgb.txt" --poses-format tum)
+  elif [[ ${base%%+*} == flow ]]; then
+    extra+=(--poses-source flow)
   elif ! command -v colmap >/dev/null; then
     echo "eval_7scenes: colmap not on PATH, COLMAP run skipped" >&2
     continue
@@ -76,7 +83,9 @@ for poses in $POSES; do
   registered=$(jq -r '.frame_stats.registered' "$run/run.json")
   # Peak resident memory of cvd itself (run.json; absent from runs of older builds).
   rss=$(jq -r 'if .peak_rss_mb then ", peak RSS \(.peak_rss_mb.process | round) MB" else "" end' "$run/run.json")
-  label="$poses ($registered/$FRAMES frames, ATE ${ate} cm, RPE rot ${rpe}, ${secs} s${rss})"
+  focal=""
+  [[ -z "$INTRINSICS" ]] && focal=", focal $(jq -r '.poses.details.intrinsics.fx | round' "$run/run.json") px"
+  label="$poses ($registered/$FRAMES frames, ATE ${ate} cm, RPE rot ${rpe}${focal}, ${secs} s${rss})"
   row() {  # label, what, metrics file
     jq -r --arg l "$1" --arg w "$2" '[$l, $w,
       (.depth.median_frame.depth.abs_rel | . * 1000 | round / 1000 | tostring),

@@ -363,7 +363,7 @@ std::vector<BadInputCase> cases() {
          fs::create_directories(t / "bin");
          write_text(t / "bin/colmap", "#!/bin/sh\necho 'simulated COLMAP failure' >&2\nexit 1\n");
          fs::permissions(t / "bin/colmap", fs::perms::owner_all);
-         return run_args(t, write_frames(t / "frames", 3));
+         return run_args(t, write_frames(t / "frames", 3), "--poses-source colmap");
        },
        5,
        {"COLMAP feature_extractor failed with exit code 1", "$T/out/cache/colmap/work/colmap.log",
@@ -381,7 +381,7 @@ std::vector<BadInputCase> cases() {
          script.replace(script.find("@REAL_COLMAP@"), 13, real);
          write_text(t / "bin/colmap", script);
          fs::permissions(t / "bin/colmap", fs::perms::owner_all);
-         return run_args(t, write_frames(t / "frames", 4));
+         return run_args(t, write_frames(t / "frames", 4), "--poses-source colmap");
        },
        5,
        {"COLMAP registered only 2 of 4 frames (at least 3 required)",
@@ -393,7 +393,7 @@ std::vector<BadInputCase> cases() {
       {"colmap_absent",
        [](const TempDir& t) {
          fs::create_directories(t / "empty_bin");
-         return run_args(t, write_frames(t / "frames", 3));
+         return run_args(t, write_frames(t / "frames", 3), "--poses-source colmap");
        },
        7,
        {"colmap not found on PATH", "give the poses and intrinsics yourself"},

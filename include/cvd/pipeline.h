@@ -51,7 +51,11 @@ struct PipelineOptions {
   std::string poses_format = "tum";            ///< --poses-format: tum | colmap | kitti
   std::optional<CameraIntrinsics> intrinsics;  ///< --intrinsics (input resolution; width/height
                                                ///< may be 0 = the frames')
-  double fov_deg = 0;                  ///< --fov: horizontal FoV when intrinsics are unknown
+  double fov_deg = 0;  ///< --fov: horizontal FoV when intrinsics are unknown
+  /// --poses-source (without poses_file): "colmap", "flow" (cameras, focal and points from
+  /// optical flow and a bundle adjustment) or "auto" (COLMAP, the flow where COLMAP cannot pose
+  /// the clip, with a warning)
+  std::string poses_source = "auto";
   std::string matcher = "sequential";  ///< --matcher: sequential | exhaustive
   int colmap_long_side = 640;          ///< --colmap-size
   int colmap_max_features = 4096;      ///< --colmap-features

@@ -34,10 +34,7 @@ bool sample_flow(const cv::Mat& flow, const cv::Mat& mask, double x, double y, c
   return true;
 }
 
-struct Observation {
-  int frame;
-  double x, y;
-};
+using Observation = PixelTrack::Observation;
 
 // Unit ray of pixel (x, y) of camera c, in world coordinates.
 Eigen::Vector3d world_ray(const FrameCamera& c, double x, double y) {
@@ -81,6 +78,45 @@ bool triangulate_track(const std::vector<FrameCamera>& cams, const std::vector<O
 
 }  // namespace
 
+std::vector<PixelTrack> follow_flow_tracks(const std::vector<cv::Mat>& next_flow,
+                                           const std::vector<cv::Mat>& next_mask,
+                                           const std::vector<bool>& usable,
+                                           const FlowTrackOptions& o) {
+  const size_t n = next_flow.size();
+  CVD_CHECK(next_mask.size() == n && (usable.empty() || usable.size() == n),
+            "follow_flow_tracks: {} flows but {} masks and {} usable flags", n, next_mask.size(),
+            usable.size());
+  CVD_CHECK(o.grid_step > 0 && o.start_every > 0 && o.min_views >= 2 && o.max_length >= o.min_views,
+            "follow_flow_tracks: bad options");
+  auto ok = [&](size_t k) { return usable.empty() || usable[k]; };
+  std::vector<PixelTrack> tracks;
+  for (size_t s = 0; s + 1 < n; s += size_t(o.start_every)) {
+    if (!ok(s) || next_flow[s].empty()) continue;
+    const cv::Mat& f0 = next_flow[s];
+    CVD_CHECK(
+        f0.type() == CV_32FC2 && next_mask[s].type() == CV_8U && next_mask[s].size() == f0.size(),
+        "follow_flow_tracks: flow {} must be CV_32FC2 with a CV_8U mask of its size", s);
+    for (int y = o.grid_step / 2; y < f0.rows; y += o.grid_step) {
+      for (int x = o.grid_step / 2; x < f0.cols; x += o.grid_step) {
+        PixelTrack t;
+        t.observations = {{static_cast<int>(s), double(x), double(y)}};
+        double px = x, py = y;
+        for (size_t k = s; k + 1 < n && t.observations.size() < size_t(o.max_length); ++k) {
+          if (next_flow[k].empty() || !ok(k + 1)) break;
+          cv::Vec2d f;
+          if (!sample_flow(next_flow[k], next_mask[k], px, py, f)) break;
+          px += f[0];
+          py += f[1];
+          if (px < 0 || py < 0 || px > next_flow[k].cols - 1 || py > next_flow[k].rows - 1) break;
+          t.observations.push_back({static_cast<int>(k + 1), px, py});
+        }
+        if (t.observations.size() >= size_t(o.min_views)) tracks.push_back(std::move(t));
+      }
+    }
+  }
+  return tracks;
+}
+
 FlowTrackStats triangulate_flow_tracks(const std::vector<FrameCamera>& cams,
                                        const std::vector<cv::Mat>& next_flow,
                                        const std::vector<cv::Mat>& next_mask,
@@ -90,36 +126,15 @@ FlowTrackStats triangulate_flow_tracks(const std::vector<FrameCamera>& cams,
   CVD_CHECK(next_flow.size() == n && next_mask.size() == n && points.size() == n,
             "triangulate_flow_tracks: {} cameras but {} flows, {} masks and {} point lists", n,
             next_flow.size(), next_mask.size(), points.size());
-  CVD_CHECK(o.grid_step > 0 && o.start_every > 0 && o.min_views >= 2 && o.max_length >= o.min_views,
-            "triangulate_flow_tracks: bad options");
+  std::vector<bool> registered(n);
+  for (size_t k = 0; k < n; ++k) registered[k] = cams[k].registered;
   FlowTrackStats stats;
-  for (size_t s = 0; s + 1 < n; s += size_t(o.start_every)) {
-    if (!cams[s].registered || next_flow[s].empty()) continue;
-    const cv::Mat& f0 = next_flow[s];
-    CVD_CHECK(
-        f0.type() == CV_32FC2 && next_mask[s].type() == CV_8U && next_mask[s].size() == f0.size(),
-        "triangulate_flow_tracks: flow {} must be CV_32FC2 with a CV_8U mask of its size", s);
-    for (int y = o.grid_step / 2; y < f0.rows; y += o.grid_step) {
-      for (int x = o.grid_step / 2; x < f0.cols; x += o.grid_step) {
-        std::vector<Observation> obs = {{static_cast<int>(s), double(x), double(y)}};
-        double px = x, py = y;
-        for (size_t k = s; k + 1 < n && obs.size() < size_t(o.max_length); ++k) {
-          if (next_flow[k].empty() || !cams[k + 1].registered) break;
-          cv::Vec2d f;
-          if (!sample_flow(next_flow[k], next_mask[k], px, py, f)) break;
-          px += f[0];
-          py += f[1];
-          if (px < 0 || py < 0 || px > next_flow[k].cols - 1 || py > next_flow[k].rows - 1) break;
-          obs.push_back({static_cast<int>(k + 1), px, py});
-        }
-        if (obs.size() < size_t(o.min_views)) continue;
-        ++stats.tracks;
-        Eigen::Vector3d X;
-        if (!triangulate_track(cams, obs, o, X)) continue;
-        for (const Observation& ob : obs) points[size_t(ob.frame)].push_back(X);
-        ++stats.kept;
-      }
-    }
+  for (const PixelTrack& t : follow_flow_tracks(next_flow, next_mask, registered, o)) {
+    ++stats.tracks;
+    Eigen::Vector3d X;
+    if (!triangulate_track(cams, t.observations, o, X)) continue;
+    for (const Observation& ob : t.observations) points[size_t(ob.frame)].push_back(X);
+    ++stats.kept;
   }
   return stats;
 }

@@ -23,6 +23,25 @@ struct FlowTrackOptions {
   double max_reprojection_px = 1.5;  // in every frame of the track
 };
 
+// One pixel followed through consecutive frames: frames[i] sees it at (x[i], y[i]), frames
+// consecutive and increasing.
+struct PixelTrack {
+  struct Observation {
+    int frame;
+    double x, y;
+  };
+  std::vector<Observation> observations;
+};
+
+// Follows pixels on a grid (every options.grid_step pixels, started in every start_every-th frame
+// with a flow) through the flows, sub-pixel, while every pixel the bilinear sample reads is trusted
+// and the position stays in the image; keeps tracks of at least min_views and at most max_length
+// frames. usable[k] == false ends tracks at frame k (empty = every frame usable).
+std::vector<PixelTrack> follow_flow_tracks(const std::vector<cv::Mat>& next_flow,
+                                           const std::vector<cv::Mat>& next_mask,
+                                           const std::vector<bool>& usable,
+                                           const FlowTrackOptions& options);
+
 struct FlowTrackStats {
   int tracks = 0;  // tracks of at least min_views frames
   int kept = 0;    // triangulated and kept

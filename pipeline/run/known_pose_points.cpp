@@ -3,7 +3,6 @@
 #include <spdlog/spdlog.h>
 #include <zlib.h>
 
-#include <fstream>
 #include <nlohmann/json.hpp>
 
 #include "engine/error.h"
@@ -59,13 +58,7 @@ void add_known_pose_points(const RunOptions& o, const FramesStage& f, const Intr
               {"cameras_crc32", cameras_crc(st.cameras, K)},
               {"frames", f.names}};
   ColmapModel model;
-  json cached_key;
-  if (std::ifstream in(dir / "cache_key.json"); in) {
-    try {
-      cached_key = json::parse(in);
-    } catch (const json::exception&) {
-    }
-  }
+  const json cached_key = read_cache_json(dir / "cache_key.json");
   std::error_code ec;
   if (fs::exists(model_dir / "images.txt") && cached_key == key) {
     model = read_colmap_text_model(model_dir);

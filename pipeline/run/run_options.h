@@ -41,6 +41,10 @@ struct RunOptions {
   std::string poses_format = "tum";      // tum | colmap | kitti
   std::optional<Intrinsics> intrinsics;  // at the input frames' resolution
   double fov_deg = 0;                    // horizontal FoV; used when intrinsics are absent
+  // Cameras when no poses file is given: "colmap" (COLMAP only), "flow" (optical flow + bundle
+  // adjustment, pipeline/poses/flow_poses.h) or "auto" (COLMAP, and the flow where COLMAP is
+  // missing, fails or registers too few frames).
+  std::string poses_source = "auto";
   std::string matcher = "sequential";
   int colmap_long_side = 640;
   int colmap_max_features = 4096;

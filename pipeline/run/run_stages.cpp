@@ -24,6 +24,8 @@
 #include "pipeline/poses/container_focal.h"
 #include "pipeline/poses/exif_focal.h"
 #include "pipeline/poses/intrinsics_focal_search.h"
+#include "pipeline/run/colmap_pose_stage.h"
+#include "pipeline/run/flow_pose_stage.h"
 #include "pipeline/run/known_pose_points.h"
 
 namespace cvd {
@@ -37,23 +39,23 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-json read_json_if(const fs::path& p) {
-  std::ifstream in(p);
+}  // namespace
+
+json read_cache_json(const fs::path& file) {
+  std::ifstream in(file);
   if (!in) return json();
   try {
     return json::parse(in);
-  } catch (...) {
+  } catch (const json::exception&) {
     return json();
   }
 }
 
-void report(const RunOptions& o, const std::string& stage, int done, int total,
-            const std::string& msg = "") {
+void report_stage_progress(const RunOptions& o, const std::string& stage, int done, int total,
+                           const std::string& msg) {
   if (o.progress) o.progress({stage, done, total, msg});
   if (o.cancel && o.cancel->load()) fail(ErrorCategory::cancelled, "cancelled during {}", stage);
 }
-
-}  // namespace
 
 // ---- frames ------------------------------------------------------------------------------------
 cv::Mat FramesStage::load(int k) const {
@@ -71,7 +73,7 @@ FramesStage run_frames_stage(const RunOptions& o, const fs::path& cache) {
               {"step", o.frame_step},
               {"first", o.first_frame},
               {"flow_long_side", o.flow_long_side}};
-  json done = read_json_if(st.dir / "frames.json");
+  json done = read_cache_json(st.dir / "frames.json");
   if (!done.is_null() && done.value("key", json()) == key) {
     st.names = done["names"].get<std::vector<std::string>>();
     st.width = done["width"];
@@ -100,7 +102,7 @@ FramesStage run_frames_stage(const RunOptions& o, const fs::path& cache) {
         });
         st.width = img.cols;
         st.height = img.rows;
-        report(o, "frames", k + 1, 0, name);
+        report_stage_progress(o, "frames", k + 1, 0, name);
       });
   st.names = info.names;
   st.input_width = info.width;
@@ -263,8 +265,10 @@ PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::
   PosesStage st;
   st.cameras.resize(f.names.size());
   st.points.resize(f.names.size());
-  // Intrinsics in order of trust: the user's, the camera's EXIF / container focal, else estimated by the
-  // COLMAP focal search (pipeline/poses/intrinsics_focal_search.h).
+  // Intrinsics in order of trust: the user's, the camera's EXIF / container focal, else estimated:
+  // by the flow bundle adjustment (pipeline/poses/flow_poses.h), which COLMAP then starts from and
+  // refines, or by COLMAP's focal search (pipeline/poses/intrinsics_focal_search.h) where the flow
+  // gives none.
   std::optional<Intrinsics> K = user_intrinsics(o, f);
   json intrinsics_info;
   if (K) {
@@ -279,7 +283,7 @@ PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::
       intrinsics_info = {
           {"source", mf.kind}, {"focal_35mm", mf.focal_35mm}, {"file", mf.file}, {"tag", mf.tag}};
     } else {
-      st.intrinsics_source = "estimated (COLMAP focal search)";
+      st.intrinsics_source = "estimated";
       intrinsics_info = {{"source", "estimated"}};
     }
   }
@@ -292,85 +296,50 @@ PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::
     st.source = o.poses_format + " file " + o.poses_file.string();
     add_known_pose_points(o, f, *K, cache, st);
   } else {
-    fs::path dir = cache / "colmap";
-    ColmapOptions co = colmap_options(o, K);
-    fs::path model_dir = dir / "result_model";
-    // What the cached model was made from: other settings, masks or frames mean another run.
-    json key = {{"matcher", o.matcher},
-                {"long_side", o.colmap_long_side},
-                {"max_features", o.colmap_max_features},
-                {"keyframes", o.colmap_keyframes},
-                {"masks", o.masks.string()},
-                {"intrinsics", K ? json{K->fx, K->fy, K->cx, K->cy, K->width, K->height} : json()},
-                {"frames", f.names}};
-    ColmapModel model;
-    std::error_code ec;
-    if (fs::exists(model_dir / "images.txt") && read_json_if(dir / "cache_key.json") != key) {
-      spdlog::info("poses: the cached COLMAP model was made with other settings; running again");
-      fs::remove_all(model_dir, ec);
+    // --poses-source: COLMAP, the flow (pipeline/run/flow_pose_stage.h), or COLMAP and the flow
+    // where COLMAP cannot pose the clip.
+    bool use_flow = o.poses_source == "flow";
+    if (o.poses_source == "auto" && find_executable("colmap").empty()) {
+      spdlog::warn("poses: colmap is not on PATH; cameras come from the optical flow");
+      st.info["colmap_failure"] = "colmap not on PATH";
+      use_flow = true;
     }
-    if (fs::exists(model_dir / "images.txt")) {
-      model = read_colmap_text_model(model_dir);
-      spdlog::info("poses: cached COLMAP model in {}", model_dir.string());
-      json cached = read_json_if(dir / "intrinsics_info.json");
-      if (cached.is_object() && cached.value("source", "") == intrinsics_info.value("source", ""))
-        intrinsics_info = cached;
-    } else {
-      report(o, "poses", 0, 1, "running COLMAP");
-      ColmapResult r = run_colmap(colmap_frames(o, f), dir / "work", co);
-      for (auto& w : r.warnings) spdlog::warn("poses: {}", w);
-      if (!r.unregistered.empty())
-        spdlog::warn("poses: COLMAP did not register {} frame(s): {}", r.unregistered.size(),
-                     fmt::format("{}", fmt::join(r.unregistered, ", ")));
-      model = r.model;
-      st.info = {
-          {"colmap_models", r.num_models},
-          {"colmap_attempts", r.attempts},
-          {"colmap_seconds", r.seconds},
-          {"unregistered", r.unregistered},
-          {"warnings", r.warnings},
-          {"keyframes",
-           {{"setting", o.colmap_keyframes},
-            {"selection", r.keyframe_reason},
-            {"mapped", r.keyframes.empty() ? json(f.names.size()) : json(r.keyframes.size())},
-            {"names", r.keyframes},
-            {"matched_pairs", r.matched_pairs},
-            {"selection_seconds", r.keyframe_seconds}}},
-          {"step_seconds", r.step_seconds}};
+    if (!use_flow) {
+      const std::optional<Intrinsics> K_given = K;
+      // No focal known: the flow adjustment's (its cameras are cached, so a fallback to them
+      // below costs nothing more) is COLMAP's one candidate, refined by its bundle adjuster.
+      std::optional<double> flow_focal;
       if (!K) {
-        json cands = json::array();
-        for (const auto& c : r.focal_candidates)
-          cands.push_back({{"focal_px", c.focal_px},
-                           {"fov_x_deg", c.fov_x_deg},
-                           {"registered", c.registered},
-                           {"models", c.num_models},
-                           {"points", c.points},
-                           {"mean_reprojection_error_px", c.mean_reprojection_error},
-                           {"seconds", c.seconds}});
-        intrinsics_info["method"] = r.focal_method;
-        intrinsics_info["candidates"] = cands;
-        intrinsics_info["searched_focal_px"] = r.searched_focal;
-        intrinsics_info["refined_focal_px"] = r.refined_focal;
+        try {
+          PosesStage flow_st = st;
+          json flow_info;
+          run_flow_poses(o, f, K, cache, flow_st, flow_info);
+          for (const auto& c : flow_st.cameras)
+            if (c.registered) {
+              flow_focal = c.intrinsics.fx;
+              break;
+            }
+          intrinsics_info["flow_focal_px"] = flow_focal ? json(*flow_focal) : json();
+        } catch (const Error& e) {
+          if (e.category() == ErrorCategory::cancelled) throw;
+          spdlog::warn("poses: no focal from the optical flow ({}); COLMAP searches for it",
+                       e.what());
+        }
       }
-      write_colmap_text_model(model_dir, model);
-      write_text_file(dir / "intrinsics_info.json", intrinsics_info.dump(1));
-      write_text_file(dir / "cache_key.json", key.dump(1));
-    }
-    for (size_t k = 0; k < f.names.size(); ++k) {
-      const ColmapImage* im = model.find_image(f.names[k]);
-      if (im) {
-        st.cameras[k] = model.frame_camera(f.names[k]);
-        st.points[k] = model.observed_points(f.names[k]);
-      } else {
-        st.cameras[k] = {f.names[k], Pose{}, K ? *K : Intrinsics{}, false, 0};
+      try {
+        run_colmap_poses(o, f, K, flow_focal, cache, st, intrinsics_info);
+      } catch (const Error& e) {
+        if (o.poses_source != "auto" || e.category() != ErrorCategory::external) throw;
+        spdlog::warn("poses: {}", e.what());
+        spdlog::warn(
+            "poses: COLMAP could not pose the clip; cameras come from the optical flow instead "
+            "(--poses-source flow)");
+        st.info["colmap_failure"] = e.what();
+        K = K_given;
+        use_flow = true;
       }
     }
-    // Every registered frame shares one camera; give unregistered frames its intrinsics.
-    for (auto& c : st.cameras)
-      if (c.registered) K = c.intrinsics;
-    for (auto& c : st.cameras)
-      if (!c.registered && K) c.intrinsics = *K;
-    st.source = "colmap";
+    if (use_flow) run_flow_poses(o, f, K, cache, st, intrinsics_info);
   }
   for (const auto& c : st.cameras)
     if (c.registered) {
@@ -484,7 +453,7 @@ FlowStage run_flow_stage(const RunOptions& o, const FramesStage& f, const PosesS
     FlowPairData d;
     d.pair = p;
     d.stem = stem;
-    json m = read_json_if(meta);
+    json m = read_cache_json(meta);
     if (!m.is_null() && m.value("key", json()) == key) {
       d.forward_valid = m["forward_valid"];
       d.backward_valid = m["backward_valid"];
@@ -528,7 +497,7 @@ FlowStage run_flow_stage(const RunOptions& o, const FramesStage& f, const PosesS
       write_text_file(meta, mj.dump());
       if (!keep_flows) d.forward = d.backward = d.forward_mask = d.backward_mask = cv::Mat();
     }
-    report(o, "flow", ++done, static_cast<int>(pairs.size()), stem);
+    report_stage_progress(o, "flow", ++done, static_cast<int>(pairs.size()), stem);
     return d;
   };
   // Several processes (mpirun): pair k is computed by rank k % R; after all finished, each

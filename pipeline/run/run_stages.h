@@ -65,6 +65,12 @@ struct FlowStage {
 FlowStage run_flow_stage(const RunOptions& o, const FramesStage& frames, const PosesStage& poses,
                          cv::Size depth_size, const std::filesystem::path& cache, bool stream);
 
+// A stage's progress to o.progress; throws Error(cancelled) once o.cancel is set.
+void report_stage_progress(const RunOptions& o, const std::string& stage, int done, int total,
+                           const std::string& msg = "");
+// The JSON of a cache file (a stage's settings key or record); null when missing or unreadable.
+nlohmann::json read_cache_json(const std::filesystem::path& file);
+
 // RGB in [0, 1], [3, H, W] f32, at `size`.
 Tensor frame_tensor(const cv::Mat& bgr, cv::Size size);
 cv::Mat depth_to_mat(const Tensor& depth_hw);

@@ -31,8 +31,7 @@ struct DemoCommand {
   RunOptions o;
   RunFlagStrings s;
   SyntheticSceneOptions scene;
-  std::string poses = "auto";  // auto | colmap | gt
-  bool no_masks = false;       // train on the moving object too (the paper's static-scene loss)
+  bool no_masks = false;  // train on the moving object too (the paper's static-scene loss)
 };
 
 std::vector<cv::Mat> load_depths(const fs::path& dir, const std::vector<std::string>& names) {
@@ -78,22 +77,29 @@ void run_demo(DemoCommand& d) {
       write_image(ignore_dir / (f.name + ".png"), keep);
     }
   }
-  bool colmap = d.poses == "colmap" || (d.poses == "auto" && !find_executable("colmap").empty());
+  // --poses-source: gt (the scene's poses), flow, colmap, or auto (COLMAP when installed, else the
+  // ground truth).
+  const std::string& source = d.o.poses_source;
+  const bool flow = source == "flow";
+  const bool colmap =
+      source == "colmap" || (source == "auto" && !find_executable("colmap").empty());
   RunOptions o = d.o;
   o.input = scene_dir / "rgb";
   o.out = root / "run";
   o.intrinsics = gt.intrinsics;
   if (!d.no_masks) o.masks = ignore_dir;
-  if (!colmap) {
+  o.poses_source = flow ? "flow" : "colmap";
+  if (!colmap && !flow) {
     o.poses_file = scene_dir / "poses.txt";
     o.poses_format = "tum";
   }
-  fmt::print("cvd demo: {} frames {}x{}; poses from {}\n", gt.frames.size(), gt.intrinsics.width,
-             gt.intrinsics.height,
-             colmap ? "COLMAP (colmap found on PATH; intrinsics given)"
-                    : "the ground truth (colmap not used: " +
-                          std::string(d.poses == "gt" ? "--poses-source gt" : "not found on PATH") +
-                          ")");
+  fmt::print(
+      "cvd demo: {} frames {}x{}; poses from {}\n", gt.frames.size(), gt.intrinsics.width,
+      gt.intrinsics.height,
+      flow     ? std::string("the optical flow (--poses-source flow; intrinsics given)")
+      : colmap ? std::string("COLMAP (colmap found on PATH; intrinsics given)")
+               : "the ground truth (colmap not used: " +
+                     std::string(source == "gt" ? "--poses-source gt" : "not found on PATH") + ")");
   fmt::print("cvd demo: {}\n",
              d.no_masks ? "the moving ball is trained on like the static scene (--no-masks)"
                         : "the moving ball's masks are passed as --masks (left out of COLMAP and "
@@ -173,7 +179,9 @@ void run_demo(DemoCommand& d) {
              o.out.string());
 
   nlohmann::json summary = {
-      {"poses", colmap ? "colmap" : "ground truth"},
+      {"poses", flow     ? "flow"
+                : colmap ? "colmap"
+                         : "ground truth"},
       {"abs_rel_median_frame",
        {{"initial", per_frame.first.mean.abs_rel}, {"final", per_frame.second.mean.abs_rel}}},
       {"abs_rel_median_video",
@@ -213,12 +221,9 @@ const CommandRegistration reg(10, [](CLI::App& app) {
   c->add_option("--scene-width", st->scene.width, "Scene image width")->capture_default_str();
   c->add_option("--scene-height", st->scene.height, "Scene image height")->capture_default_str();
   c->add_option("--scene-seed", st->scene.seed, "Scene random seed");
-  c->add_option("--poses-source", st->poses,
-                "Where poses come from: auto (COLMAP when installed), colmap, gt")
-      ->check(CLI::IsMember({"auto", "colmap", "gt"}));
   c->add_flag("--no-masks", st->no_masks,
               "Do not pass the moving object's masks: train on it as if it were static");
-  add_pipeline_flags(c, st->o, st->s);
+  add_pipeline_flags(c, st->o, st->s, /*ground_truth_poses=*/true);
   c->callback([st] { run_demo(*st); });
 });
 

@@ -13,7 +13,7 @@
 
 namespace cvd::cli {
 
-void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s) {
+void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s, bool ground_truth_poses) {
   c->add_option("--max-frames", o.max_frames, "Use at most this many frames (0 = all)");
   c->add_option("--frame-step", o.frame_step, "Use every n-th frame")->check(CLI::PositiveNumber);
   c->add_option("--first-frame", o.first_frame, "Skip frames before this index");
@@ -50,6 +50,20 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s) {
       "--fov: the JPEG EXIF 35 mm focal, else a COLMAP focal search)");
   c->add_option("--fov", o.fov_deg,
                 "Horizontal field of view in degrees (when fx,fy,cx,cy are unknown)");
+  if (ground_truth_poses) {
+    c->add_option("--poses-source", o.poses_source,
+                  "Cameras: auto (COLMAP when installed, else the ground truth), colmap, flow "
+                  "(optical flow tracks and a bundle adjustment), gt (the scene's own poses)")
+        ->check(CLI::IsMember({"auto", "colmap", "flow", "gt"}))
+        ->capture_default_str();
+  } else {
+    c->add_option("--poses-source", o.poses_source,
+                  "Cameras without --poses: colmap, flow (optical flow tracks and a bundle "
+                  "adjustment of cameras, focal and points), or auto (COLMAP, and the flow with a "
+                  "warning where COLMAP is missing, fails or registers too few frames)")
+        ->check(CLI::IsMember({"auto", "colmap", "flow"}))
+        ->capture_default_str();
+  }
   c->add_option("--matcher", o.matcher, "COLMAP matcher")
       ->check(CLI::IsMember({"sequential", "exhaustive"}));
   c->add_option("--colmap-size", o.colmap_long_side, "Long side of the frames COLMAP sees");

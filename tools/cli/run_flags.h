@@ -16,8 +16,10 @@ struct RunFlagStrings {
               *quality_flag = nullptr;
 };
 
-// Adds the pipeline flags (everything but input/output) to `cmd`.
-void add_pipeline_flags(CLI::App* cmd, RunOptions& o, RunFlagStrings& s);
+// Adds the pipeline flags (everything but input/output) to `cmd`. ground_truth_poses: the command
+// has ground-truth poses (`cvd demo`), so --poses-source also takes "gt".
+void add_pipeline_flags(CLI::App* cmd, RunOptions& o, RunFlagStrings& s,
+                        bool ground_truth_poses = false);
 // Applies parsed string flags (--intrinsics, the --quality preset to the knobs not given) to `o`;
 // throws cvd::Error on bad values.
 void apply_flag_strings(const RunFlagStrings& s, RunOptions& o);

@@ -1,0 +1,377 @@
+#include "pipeline/poses/flow_poses.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <mutex>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/video/tracking.hpp>
+#include <thread>
+
+#include "engine/error.h"
+#include "pipeline/poses/flow_camera_init.h"
+#include "pipeline/poses/track_bundle_adjustment.h"
+
+namespace cvd {
+
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// Pixel coordinates between two resolutions with pixel centres at integers (cv::resize's
+// half-pixel alignment): x_b = (x_a + 0.5) * s - 0.5.
+double rescale(double x, double s) { return (x + 0.5) * s - 0.5; }
+
+// Forward flow of a -> b with the pixels whose backward flow returns within `tolerance` (and that
+// the masks allow at both ends) marked trusted.
+void consistent_flow(cv::DISOpticalFlow& dis, const cv::Mat& a, const cv::Mat& b,
+                     const cv::Mat& mask_a, const cv::Mat& mask_b, double tolerance, cv::Mat& fwd,
+                     cv::Mat& trusted) {
+  cv::Mat bwd;
+  dis.calc(a, b, fwd);
+  dis.calc(b, a, bwd);
+  trusted = cv::Mat::zeros(a.size(), CV_8U);
+  for (int y = 0; y < a.rows; ++y)
+    for (int x = 0; x < a.cols; ++x) {
+      if (!mask_a.empty() && !mask_a.at<uint8_t>(y, x)) continue;
+      const cv::Vec2f f = fwd.at<cv::Vec2f>(y, x);
+      const int xb = static_cast<int>(std::lround(x + f[0])),
+                yb = static_cast<int>(std::lround(y + f[1]));
+      if (xb < 0 || yb < 0 || xb >= a.cols || yb >= a.rows) continue;
+      if (!mask_b.empty() && !mask_b.at<uint8_t>(yb, xb)) continue;
+      const cv::Vec2f g = bwd.at<cv::Vec2f>(yb, xb);
+      if (std::hypot(f[0] + g[0], f[1] + g[1]) <= tolerance) trusted.at<uint8_t>(y, x) = 255;
+    }
+}
+
+struct Attempt {
+  TrackCameras cams;
+  std::vector<Eigen::Vector3d> points;
+  TrackBundleReport report;
+  int guessed = 0;
+  double score = std::numeric_limits<double>::infinity();  // truncated mean squared error, px^2
+  bool ok = false;
+};
+
+// How the first rotations are chained (flow_camera_init.h): the essential matrix of each pair, or
+// a rotation alone. Which one lands in the better minimum depends on the clip's parallax, so both
+// are adjusted and compared.
+const char* rotation_start_name(double rotation_only_px) {
+  return rotation_only_px > 0 ? "rotation fit" : "essential matrix";
+}
+
+// Mean over every observation of min(error^2, cap^2): comparable between adjustments that left
+// different observations out.
+double truncated_score(const std::vector<PixelTrack>& tracks, const std::vector<bool>& usable,
+                       const TrackCameras& cams, const std::vector<Eigen::Vector3d>& points,
+                       double cap) {
+  double sum = 0;
+  size_t count = 0;
+  for (size_t t = 0; t < tracks.size(); ++t)
+    for (const auto& ob : tracks[t].observations) {
+      if (!usable[size_t(ob.frame)]) continue;
+      const double e = reprojection_error_px(cams, points[t], ob);
+      sum += std::isfinite(e) ? std::min(e * e, cap * cap) : cap * cap;
+      ++count;
+    }
+  return count ? sum / double(count) : std::numeric_limits<double>::infinity();
+}
+
+// Initial cameras for `focal` (rotations chained as rotation_only_px says), then one robust
+// adjustment of `tracks`.
+Attempt adjust_from(const std::vector<PixelTrack>& tracks, const std::vector<bool>& usable,
+                    TrackCameras cams, bool refine_focal, double rotation_only_px,
+                    const FlowPoseOptions& o, int iterations) {
+  Attempt a;
+  a.guessed = chain_rotations(tracks, usable, cams, 30, rotation_only_px);
+  if (!centres_from_rotations(tracks, usable, cams)) {
+    // No translation recoverable (e.g. a camera that only rotates): a tiny forward motion, so
+    // that the points have a depth; the adjustment decides the rest.
+    for (size_t k = 0; k < cams.c.size(); ++k) cams.c[k] = Eigen::Vector3d(0, 0, 1e-3 * double(k));
+  }
+  a.points = intersect_track_rays(tracks, usable, cams);
+  place_points_in_front(tracks, usable, cams, a.points);
+  TrackBundleOptions bo;
+  bo.refine_focal = refine_focal;
+  bo.huber_px = o.huber_px;
+  bo.outlier_px = o.outlier_px;
+  bo.max_iterations = iterations;
+  bo.threads = o.threads;
+  a.report = bundle_adjust_tracks(tracks, usable, a.points, cams, bo);
+  a.cams = std::move(cams);
+  a.ok = a.report.usable && a.report.residuals > 0;
+  if (a.ok) a.score = truncated_score(tracks, usable, a.cams, a.points, o.outlier_px);
+  return a;
+}
+
+std::vector<PixelTrack> thin(const std::vector<PixelTrack>& tracks, size_t at_most) {
+  if (tracks.size() <= at_most) return tracks;
+  std::vector<PixelTrack> out;
+  out.reserve(at_most);
+  const double step = double(tracks.size()) / double(at_most);
+  for (size_t i = 0; i < at_most; ++i) out.push_back(tracks[size_t(i * step)]);
+  return out;
+}
+
+}  // namespace
+
+FlowPoseTracks track_frames(const std::vector<std::string>& names,
+                            const std::function<cv::Mat(size_t)>& frame,
+                            const std::function<cv::Mat(size_t)>& mask, const FlowPoseOptions& o) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const size_t n = names.size();
+  CVD_CHECK(n >= 2, "flow poses: {} frame(s); at least 2 are needed", n);
+  FlowPoseTracks out;
+  const cv::Mat first = frame(0);
+  CVD_CHECK(!first.empty(), "flow poses: frame '{}' is empty", names[0]);
+  const int W = first.cols, H = first.rows;
+  const double s = std::min(1.0, double(o.long_side) / std::max(W, H));
+  const cv::Size work(std::max(16, int(std::lround(W * s))), std::max(16, int(std::lround(H * s))));
+  out.frame_size = cv::Size(W, H);
+  out.work_size = work;
+  std::vector<cv::Mat> grey(n), masks(n), next_flow(n), next_mask(n);
+  for (size_t k = 0; k < n; ++k) {
+    cv::Mat bgr = k == 0 ? first : frame(k);
+    CVD_CHECK(bgr.cols == W && bgr.rows == H, "flow poses: frame '{}' is {}x{}, frame '{}' {}x{}",
+              names[k], bgr.cols, bgr.rows, names[0], W, H);
+    cv::Mat small;
+    cv::resize(bgr, small, work, 0, 0, cv::INTER_AREA);
+    cv::cvtColor(small, grey[k], cv::COLOR_BGR2GRAY);
+    cv::Mat m = mask ? mask(k) : cv::Mat();
+    if (!m.empty()) cv::resize(m, masks[k], work, 0, 0, cv::INTER_NEAREST);
+  }
+  {
+    const int threads = std::max(
+        1, o.threads > 0 ? o.threads : static_cast<int>(std::thread::hardware_concurrency()));
+    std::vector<std::thread> pool;
+    std::mutex error_mutex;
+    std::string error;
+    for (int w = 0; w < threads; ++w)
+      pool.emplace_back([&, w] {
+        try {
+          cv::Ptr<cv::DISOpticalFlow> dis =
+              cv::DISOpticalFlow::create(cv::DISOpticalFlow::PRESET_MEDIUM);
+          for (size_t k = size_t(w); k + 1 < n; k += size_t(threads))
+            consistent_flow(*dis, grey[k], grey[k + 1], masks[k], masks[k + 1],
+                            o.forward_backward_px, next_flow[k], next_mask[k]);
+        } catch (const std::exception& e) {
+          std::lock_guard<std::mutex> lock(error_mutex);
+          error = e.what();
+        }
+      });
+    for (auto& t : pool) t.join();
+    if (!error.empty()) fail(ErrorCategory::external, "flow poses: optical flow failed: {}", error);
+  }
+  out.tracks = thin(follow_flow_tracks(next_flow, next_mask, {}, o.tracks), size_t(o.max_tracks));
+  out.seconds = seconds_since(t0);
+  return out;
+}
+
+FlowPoseResult estimate_flow_poses(const std::vector<std::string>& names,
+                                   const std::function<cv::Mat(size_t)>& frame,
+                                   const std::function<cv::Mat(size_t)>& mask,
+                                   const std::optional<Intrinsics>& K, const FlowPoseOptions& o) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const size_t n = names.size();
+  FlowPoseResult res;
+  FlowPoseTracks pt = track_frames(names, frame, mask, o);
+  res.flow_seconds = pt.seconds;
+  std::vector<PixelTrack> tracks = std::move(pt.tracks);
+  const int W = pt.frame_size.width, H = pt.frame_size.height;
+  const cv::Size work = pt.work_size;
+  const double sx = double(work.width) / W;
+  res.tracks = static_cast<int>(tracks.size());
+  if (tracks.empty())
+    fail(ErrorCategory::external,
+         "flow poses: no pixel could be followed over {} frames (flow inconsistent everywhere)",
+         o.tracks.min_views);
+  std::vector<int> views(n, 0);
+  for (const auto& t : tracks)
+    for (const auto& ob : t.observations) ++views[size_t(ob.frame)];
+  std::vector<bool> usable(n);
+  for (size_t k = 0; k < n; ++k) usable[k] = views[k] >= o.min_frame_observations;
+
+  // ---- intrinsics at the working resolution (square pixels: y rescaled by fx / fy) ----
+  TrackCameras base;
+  base.width = work.width;
+  base.height = work.height;
+  double aspect = 1.0;  // fx / fy of the given intrinsics
+  if (K) {
+    base.focal = K->fx * sx;
+    base.cx = rescale(K->cx, sx);
+    base.cy = rescale(K->cy, double(work.height) / H);
+    aspect = K->fx / K->fy;
+    if (aspect != 1.0)
+      for (auto& t : tracks)
+        for (auto& ob : t.observations) ob.y = (ob.y - base.cy) * aspect + base.cy;
+  } else {
+    base.cx = rescale(0.5 * W - 0.5, sx);
+    base.cy = rescale(0.5 * H - 0.5, double(work.height) / H);
+  }
+  base.R.assign(n, Eigen::Matrix3d::Identity());
+  base.c.assign(n, Eigen::Vector3d::Zero());
+
+  // ---- adjustment: from each start (focal candidate x rotation chaining) on a subset of the
+  // tracks; the lowest truncated error wins and is adjusted on every track ----
+  const auto ta = std::chrono::steady_clock::now();
+  res.focal_method = K ? "given" : "flow bundle adjustment";
+  std::vector<double> focals;
+  if (K) {
+    focals.push_back(base.focal);
+  } else {
+    for (double fov : o.candidate_fov_deg)
+      focals.push_back(0.5 * work.width / std::tan(0.5 * fov * M_PI / 180.0));
+  }
+  const std::vector<PixelTrack> few = thin(tracks, size_t(o.candidate_tracks));
+  double best_score = std::numeric_limits<double>::infinity(), best_rotation_only_px = 0;
+  double best_focal = 0;
+  for (double focal : focals)
+    for (double rotation_only_px : {0.0, std::numeric_limits<double>::infinity()}) {
+      TrackCameras c = base;
+      c.focal = focal;
+      const Attempt a = adjust_from(few, usable, c, !K, rotation_only_px, o, 25);
+      FlowPoseCandidate cand;
+      cand.start_fov_deg = 2.0 * std::atan(0.5 * work.width / focal) * 180.0 / M_PI;
+      cand.start_focal_px = focal / sx;
+      cand.focal_px = a.cams.focal / sx;
+      cand.rotations = rotation_start_name(rotation_only_px);
+      cand.rms_px = a.report.rms_px;
+      cand.score = a.ok ? a.score : -1;
+      res.candidates.push_back(cand);
+      spdlog::info(
+          "poses: flow adjustment from {:.0f} deg ({:.1f} px), {}: focal {:.1f} px, truncated "
+          "mean square error {:.4g} px^2, RMS {:.2f} px",
+          cand.start_fov_deg, cand.start_focal_px, cand.rotations, cand.focal_px, a.score,
+          cand.rms_px);
+      if (a.ok && a.score < best_score) {
+        best_score = a.score;
+        best_focal = a.cams.focal;
+        best_rotation_only_px = rotation_only_px;
+      }
+    }
+  if (!(best_focal > 0))
+    fail(ErrorCategory::external, "flow poses: no start gave a usable bundle adjustment");
+  base.focal = best_focal;
+  res.rotation_start = rotation_start_name(best_rotation_only_px);
+  Attempt best = adjust_from(tracks, usable, base, !K, best_rotation_only_px, o, 50);
+  if (!best.ok) fail(ErrorCategory::external, "flow poses: the bundle adjustment failed");
+  res.guessed_rotations = best.guessed;
+  res.adjustment_seconds = seconds_since(ta);
+  res.residuals = best.report.residuals;
+  res.rms_px = best.report.rms_px;
+
+  // ---- registered frames, exported points, scale ----
+  std::fill(views.begin(), views.end(), 0);
+  for (size_t t = 0; t < tracks.size(); ++t)
+    for (const auto& ob : tracks[t].observations)
+      if (usable[size_t(ob.frame)] &&
+          reprojection_error_px(best.cams, best.points[t], ob) <= o.outlier_px)
+        ++views[size_t(ob.frame)];
+  std::vector<bool> registered(n);
+  for (size_t k = 0; k < n; ++k) registered[k] = usable[k] && views[k] >= o.min_frame_observations;
+  // A point is exported with its observations within export_px, when at least two remain and
+  // their rays span min_point_parallax_deg (a point seen along nearly parallel rays has no depth).
+  std::vector<std::vector<PixelTrack::Observation>> inliers(tracks.size());
+  std::vector<double> parallax(tracks.size(), 0.0);
+  for (size_t t = 0; t < tracks.size(); ++t) {
+    std::vector<Eigen::Vector3d> rays;
+    for (const auto& ob : tracks[t].observations) {
+      const size_t k = static_cast<size_t>(ob.frame);
+      if (!registered[k] || reprojection_error_px(best.cams, best.points[t], ob) > o.export_px)
+        continue;
+      inliers[t].push_back(ob);
+      rays.push_back(best.cams.R[k] * Eigen::Vector3d((ob.x - best.cams.cx) / best.cams.focal,
+                                                      (ob.y - best.cams.cy) / best.cams.focal, 1)
+                                          .normalized());
+    }
+    double min_cos = 1.0;
+    for (size_t i = 0; i < rays.size(); ++i)
+      for (size_t j = i + 1; j < rays.size(); ++j)
+        min_cos = std::min(min_cos, rays[i].dot(rays[j]));
+    parallax[t] = std::acos(std::clamp(min_cos, -1.0, 1.0)) * 180.0 / M_PI;
+  }
+  auto exported = [&](size_t t) {
+    return inliers[t].size() >= size_t(o.min_point_views) &&
+           parallax[t] >= o.min_point_parallax_deg;
+  };
+  {
+    std::vector<double> p;
+    for (size_t t = 0; t < tracks.size(); ++t)
+      if (inliers[t].size() >= 2) p.push_back(parallax[t]);
+    if (!p.empty()) {
+      std::nth_element(p.begin(), p.begin() + long(p.size() / 2), p.end());
+      res.median_parallax_deg = p[p.size() / 2];
+    }
+  }
+  // Units: the median depth of the exported points is 1.
+  std::vector<double> depths;
+  for (size_t t = 0; t < tracks.size(); ++t) {
+    if (!exported(t)) continue;
+    for (const auto& ob : inliers[t])
+      depths.push_back((best.cams.R[size_t(ob.frame)].transpose() *
+                        (best.points[t] - best.cams.c[size_t(ob.frame)]))
+                           .z());
+  }
+  double unit = 1.0;
+  if (!depths.empty()) {
+    std::nth_element(depths.begin(), depths.begin() + long(depths.size() / 2), depths.end());
+    if (depths[depths.size() / 2] > 0) unit = depths[depths.size() / 2];
+  }
+
+  // ---- cameras and model at the frames' resolution ----
+  Intrinsics Kout;
+  if (K) {
+    Kout = *K;
+  } else {
+    const double f = best.cams.focal / sx;
+    Kout = {f, f, 0.5 * W - 0.5, 0.5 * H - 0.5, W, H};
+  }
+  res.cameras.resize(n);
+  for (size_t k = 0; k < n; ++k) {
+    res.cameras[k] = {names[k], Pose{}, Kout, bool(registered[k]), 0};
+    if (registered[k])
+      res.cameras[k].pose = Pose{best.cams.R[k], best.cams.c[k] / unit};
+    else
+      res.unregistered.push_back(names[k]);
+  }
+  res.model = colmap_model_from_frames(res.cameras);
+  const double sy = double(work.height) / H;
+  int64_t next_id = 1;
+  for (size_t t = 0; t < tracks.size(); ++t) {
+    if (!exported(t)) continue;
+    ColmapPoint p;
+    p.id = next_id++;
+    p.xyz = best.points[t] / unit;
+    double err = 0;
+    for (const auto& ob : inliers[t]) {
+      ColmapImage& img = res.model.images.at(names[size_t(ob.frame)]);
+      const double y_unsquared = (ob.y - best.cams.cy) / aspect + best.cams.cy;
+      ColmapObservation co;
+      co.xy = Eigen::Vector2d(rescale(ob.x, 1.0 / sx) + 0.5, rescale(y_unsquared, 1.0 / sy) + 0.5);
+      co.point3d_id = p.id;
+      p.track.push_back({img.id, static_cast<int>(img.observations.size())});
+      img.observations.push_back(co);
+      err += reprojection_error_px(best.cams, best.points[t], ob) / sx;
+    }
+    p.error = err / double(p.track.size());
+    res.model.points[p.id] = std::move(p);
+  }
+  res.points = static_cast<int>(res.model.points.size());
+  if (!res.unregistered.empty())
+    res.warnings.push_back(fmt::format("flow poses: {} frame(s) without enough tracked pixels: {}",
+                                       res.unregistered.size(),
+                                       fmt::format("{}", fmt::join(res.unregistered, ", "))));
+  if (res.median_parallax_deg < 1.0)
+    res.warnings.push_back(fmt::format(
+        "flow poses: little parallax (median {:.2f} deg per track): depth from these cameras "
+        "rests on small baselines",
+        res.median_parallax_deg));
+  res.seconds = seconds_since(t0);
+  return res;
+}
+
+}  // namespace cvd

@@ -340,6 +340,23 @@ TEST(ColmapModel, RejectsMalformedFilesNamingFileAndLine) {
   }
 }
 
+// Found by the 1 M-execution run of tests/fuzz/fuzz_colmap_text: a '\r' between two fields of an
+// image line split the fields but not the name search, which then threw std::out_of_range (not a
+// cvd::Error). Any whitespace now separates fields in both.
+TEST(ColmapModel, CarriageReturnInsideAnImageLineSeparatesFieldsLikeASpace) {
+  test::TempDir dir;
+  write_file(dir / "cameras.txt", "# h\n1 PINHOLE 640 480 500 500 320 240\n");
+  write_file(dir / "images.txt", "# h\n1 1 0 0 0 0.5\r0 0 1 a.png\n\n");
+  write_file(dir / "points3D.txt", "");
+  const ColmapModel m = read_colmap_text_model(dir.path());
+  ASSERT_EQ(m.images.size(), 1u);
+  EXPECT_EQ(m.images.begin()->first, "a.png");
+  // A line whose fields end before the name is a format error naming the line, not a crash.
+  write_file(dir / "images.txt", "# h\n1 1 0 0 0 0.5\r0 0 1\r\n\n");
+  expect_format_error([&] { read_colmap_text_model(dir.path()); }, dir / "images.txt", 2,
+                      "expected IMAGE_ID");
+}
+
 // ---- Intrinsics JSON ----------------------------------------------------------------------------
 
 TEST(IntrinsicsJson, RoundTripAndValidation) {

@@ -26,10 +26,13 @@ std::vector<std::string> split_whitespace(const std::string& line) {
   return tokens;
 }
 
+// The characters split_whitespace (operator>>) separates fields at: every isspace character.
+constexpr const char* kWhitespace = " \t\n\v\f\r";
+
 std::string trim(const std::string& s) {
-  size_t b = s.find_first_not_of(" \t\r\n");
+  size_t b = s.find_first_not_of(kWhitespace);
   if (b == std::string::npos) return {};
-  size_t e = s.find_last_not_of(" \t\r\n");
+  size_t e = s.find_last_not_of(kWhitespace);
   return s.substr(b, e - b + 1);
 }
 
@@ -323,10 +326,14 @@ ColmapModel read_colmap_text_model(const std::filesystem::path& directory) {
       for (int i = 0; i < 7; ++i) v[i] = r.number(tok[1 + i], "pose value");
       img.camera_id = int(r.integer(tok[8], "camera id"));
       // The name is the rest of the line after the camera id (it may contain spaces).
+      // Fields are separated by the same whitespace as split_whitespace's (a '\r' inside the
+      // line made the two disagree and substr throw std::out_of_range: found by the
+      // 1 M-execution fuzz run; regression test ColmapModel.CarriageReturnInsideAnImageLine...).
       std::string rest = trim(line);
       for (int i = 0; i < 9; ++i) {
-        rest = rest.substr(rest.find_first_of(" \t"));
-        rest = trim(rest);
+        const size_t gap = rest.find_first_of(kWhitespace);
+        if (gap == std::string::npos) r.error("expected an image name after the camera id");
+        rest = trim(rest.substr(gap));
       }
       img.name = rest;
       if (!model.cameras.count(img.camera_id))

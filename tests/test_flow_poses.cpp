@@ -242,6 +242,24 @@ TEST(FlowPoses, GeneratedSceneCamerasAndFocalFromFlowAlone) {
   EXPECT_EQ(estimated.focal_method, "flow bundle adjustment");
   EXPECT_EQ(estimated.candidates.size(), 2 * o.candidate_fov_deg.size());  // x 2 rotation starts
   EXPECT_NEAR(estimated.cameras[0].intrinsics.fx / gt.intrinsics.fx, 1.0, 0.05);
+  // The finalists (adjusted further on every track) carry their final error.
+  int finalists = 0;
+  for (const auto& c : estimated.candidates) finalists += c.final_score > 0;
+  EXPECT_GE(finalists, 1);
+  EXPECT_LE(finalists, o.finalists);
+
+  // A rerun gives the same cameras, bit for bit (every adjustment is single-threaded, side by
+  // side), whatever the number of threads.
+  FlowPoseOptions one_thread = o;
+  one_thread.threads = 1;
+  const FlowPoseResult again =
+      estimate_flow_poses(names, frame, nullptr, gt.intrinsics, one_thread);
+  ASSERT_EQ(again.cameras.size(), known.cameras.size());
+  for (size_t k = 0; k < again.cameras.size(); ++k) {
+    EXPECT_EQ(again.cameras[k].pose.t, known.cameras[k].pose.t) << names[k];
+    EXPECT_EQ(again.cameras[k].pose.R, known.cameras[k].pose.R) << names[k];
+  }
+  EXPECT_EQ(again.points, known.points);
 }
 
 TEST(FlowPoses, RunWithoutColmapFallsBackToTheFlowWithAWarning) {

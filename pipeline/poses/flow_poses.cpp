@@ -81,11 +81,10 @@ double truncated_score(const std::vector<PixelTrack>& tracks, const std::vector<
   return count ? sum / double(count) : std::numeric_limits<double>::infinity();
 }
 
-// Initial cameras for `focal` (rotations chained as rotation_only_px says), then one robust
-// adjustment of `tracks`.
-Attempt adjust_from(const std::vector<PixelTrack>& tracks, const std::vector<bool>& usable,
-                    TrackCameras cams, bool refine_focal, double rotation_only_px,
-                    const FlowPoseOptions& o, int iterations) {
+// Initial cameras for cams.focal (rotations chained as rotation_only_px says, centres in closed
+// form) and points intersected from them.
+Attempt start_from(const std::vector<PixelTrack>& tracks, const std::vector<bool>& usable,
+                   TrackCameras cams, double rotation_only_px) {
   Attempt a;
   a.guessed = chain_rotations(tracks, usable, cams, 30, rotation_only_px);
   if (!centres_from_rotations(tracks, usable, cams)) {
@@ -93,19 +92,62 @@ Attempt adjust_from(const std::vector<PixelTrack>& tracks, const std::vector<boo
     // that the points have a depth; the adjustment decides the rest.
     for (size_t k = 0; k < cams.c.size(); ++k) cams.c[k] = Eigen::Vector3d(0, 0, 1e-3 * double(k));
   }
-  a.points = intersect_track_rays(tracks, usable, cams);
-  place_points_in_front(tracks, usable, cams, a.points);
+  a.cams = std::move(cams);
+  a.points = intersect_track_rays(tracks, usable, a.cams);
+  place_points_in_front(tracks, usable, a.cams, a.points);
+  return a;
+}
+
+// The adjusted cameras of `from` with points intersected for (other) tracks: a warm start.
+Attempt continue_from(const std::vector<PixelTrack>& tracks, const std::vector<bool>& usable,
+                      const Attempt& from) {
+  Attempt a;
+  a.guessed = from.guessed;
+  a.cams = from.cams;
+  a.points = intersect_track_rays(tracks, usable, a.cams);
+  place_points_in_front(tracks, usable, a.cams, a.points);
+  return a;
+}
+
+// One robust adjustment of a's cameras and points, single-threaded (Ceres' threaded Schur
+// elimination sums in a varying order; one thread per adjustment keeps reruns identical, and the
+// adjustments themselves run side by side).
+void adjust(Attempt& a, const std::vector<PixelTrack>& tracks, const std::vector<bool>& usable,
+            bool refine_focal, const FlowPoseOptions& o, int iterations) {
   TrackBundleOptions bo;
   bo.refine_focal = refine_focal;
   bo.huber_px = o.huber_px;
   bo.outlier_px = o.outlier_px;
   bo.max_iterations = iterations;
-  bo.threads = o.threads;
-  a.report = bundle_adjust_tracks(tracks, usable, a.points, cams, bo);
-  a.cams = std::move(cams);
+  bo.threads = 1;
+  a.report = bundle_adjust_tracks(tracks, usable, a.points, a.cams, bo);
   a.ok = a.report.usable && a.report.residuals > 0;
-  if (a.ok) a.score = truncated_score(tracks, usable, a.cams, a.points, o.outlier_px);
-  return a;
+  a.score = a.ok ? truncated_score(tracks, usable, a.cams, a.points, o.outlier_px)
+                 : std::numeric_limits<double>::infinity();
+}
+
+int worker_threads(const FlowPoseOptions& o) {
+  return std::max(
+      1, o.threads > 0 ? o.threads : static_cast<int>(std::thread::hardware_concurrency()));
+}
+
+// fn(i) for i in [0, count) on up to `threads` threads; the first exception is rethrown.
+void run_side_by_side(size_t count, int threads, const std::function<void(size_t)>& fn) {
+  std::vector<std::thread> pool;
+  std::mutex error_mutex;
+  std::exception_ptr error;
+  const size_t workers = std::min(count, size_t(std::max(1, threads)));
+  for (size_t w = 0; w < workers; ++w)
+    pool.emplace_back([&, w] {
+      try {
+        for (size_t i = w; i < count; i += workers) fn(i);
+      } catch (...) {
+        std::lock_guard<std::mutex> lock(error_mutex);
+        if (!error) error = std::current_exception();
+      }
+    });
+  for (auto& t : pool) t.join();
+  if (error) std::rethrow_exception(error);
 }
 
 std::vector<PixelTrack> thin(const std::vector<PixelTrack>& tracks, size_t at_most) {
@@ -144,27 +186,20 @@ FlowPoseTracks track_frames(const std::vector<std::string>& names,
     cv::Mat m = mask ? mask(k) : cv::Mat();
     if (!m.empty()) cv::resize(m, masks[k], work, 0, 0, cv::INTER_NEAREST);
   }
-  {
-    const int threads = std::max(
-        1, o.threads > 0 ? o.threads : static_cast<int>(std::thread::hardware_concurrency()));
-    std::vector<std::thread> pool;
-    std::mutex error_mutex;
-    std::string error;
-    for (int w = 0; w < threads; ++w)
-      pool.emplace_back([&, w] {
-        try {
-          cv::Ptr<cv::DISOpticalFlow> dis =
-              cv::DISOpticalFlow::create(cv::DISOpticalFlow::PRESET_MEDIUM);
-          for (size_t k = size_t(w); k + 1 < n; k += size_t(threads))
-            consistent_flow(*dis, grey[k], grey[k + 1], masks[k], masks[k + 1],
-                            o.forward_backward_px, next_flow[k], next_mask[k]);
-        } catch (const std::exception& e) {
-          std::lock_guard<std::mutex> lock(error_mutex);
-          error = e.what();
-        }
-      });
-    for (auto& t : pool) t.join();
-    if (!error.empty()) fail(ErrorCategory::external, "flow poses: optical flow failed: {}", error);
+  // One DIS instance per thread; consecutive pairs are independent.
+  const int threads = worker_threads(o);
+  std::vector<cv::Ptr<cv::DISOpticalFlow>> dis(static_cast<size_t>(threads));
+  try {
+    run_side_by_side(size_t(threads), threads, [&](size_t w) {
+      dis[w] = cv::DISOpticalFlow::create(cv::DISOpticalFlow::PRESET_MEDIUM);
+      for (size_t k = w; k + 1 < n; k += size_t(threads))
+        consistent_flow(*dis[w], grey[k], grey[k + 1], masks[k], masks[k + 1],
+                        o.forward_backward_px, next_flow[k], next_mask[k]);
+    });
+  } catch (const Error&) {
+    throw;
+  } catch (const std::exception& e) {
+    fail(ErrorCategory::external, "flow poses: optical flow failed: {}", e.what());
   }
   out.tracks = thin(follow_flow_tracks(next_flow, next_mask, {}, o.tracks), size_t(o.max_tracks));
   out.seconds = seconds_since(t0);
@@ -216,7 +251,8 @@ FlowPoseResult estimate_flow_poses(const std::vector<std::string>& names,
   base.c.assign(n, Eigen::Vector3d::Zero());
 
   // ---- adjustment: from each start (focal candidate x rotation chaining) on a subset of the
-  // tracks; the lowest truncated error wins and is adjusted on every track ----
+  // tracks, side by side; the starts with the lowest truncated error are adjusted further on every
+  // track from where they ended, and the lowest error there wins ----
   const auto ta = std::chrono::steady_clock::now();
   res.focal_method = K ? "given" : "flow bundle adjustment";
   std::vector<double> focals;
@@ -226,41 +262,79 @@ FlowPoseResult estimate_flow_poses(const std::vector<std::string>& names,
     for (double fov : o.candidate_fov_deg)
       focals.push_back(0.5 * work.width / std::tan(0.5 * fov * M_PI / 180.0));
   }
-  const std::vector<PixelTrack> few = thin(tracks, size_t(o.candidate_tracks));
-  double best_score = std::numeric_limits<double>::infinity(), best_rotation_only_px = 0;
-  double best_focal = 0;
+  struct Start {
+    double focal, rotation_only_px;
+  };
+  std::vector<Start> starts;
   for (double focal : focals)
-    for (double rotation_only_px : {0.0, std::numeric_limits<double>::infinity()}) {
-      TrackCameras c = base;
-      c.focal = focal;
-      const Attempt a = adjust_from(few, usable, c, !K, rotation_only_px, o, 25);
-      FlowPoseCandidate cand;
-      cand.start_fov_deg = 2.0 * std::atan(0.5 * work.width / focal) * 180.0 / M_PI;
-      cand.start_focal_px = focal / sx;
-      cand.focal_px = a.cams.focal / sx;
-      cand.rotations = rotation_start_name(rotation_only_px);
-      cand.rms_px = a.report.rms_px;
-      cand.score = a.ok ? a.score : -1;
-      res.candidates.push_back(cand);
-      spdlog::info(
-          "poses: flow adjustment from {:.0f} deg ({:.1f} px), {}: focal {:.1f} px, truncated "
-          "mean square error {:.4g} px^2, RMS {:.2f} px",
-          cand.start_fov_deg, cand.start_focal_px, cand.rotations, cand.focal_px, a.score,
-          cand.rms_px);
-      if (a.ok && a.score < best_score) {
-        best_score = a.score;
-        best_focal = a.cams.focal;
-        best_rotation_only_px = rotation_only_px;
-      }
-    }
-  if (!(best_focal > 0))
+    for (double rotation_only_px : {0.0, std::numeric_limits<double>::infinity()})
+      starts.push_back({focal, rotation_only_px});
+  const std::vector<PixelTrack> few = thin(tracks, size_t(o.candidate_tracks));
+  std::vector<Attempt> tried(starts.size());
+  run_side_by_side(starts.size(), worker_threads(o), [&](size_t i) {
+    TrackCameras c = base;
+    c.focal = starts[i].focal;
+    tried[i] = start_from(few, usable, c, starts[i].rotation_only_px);
+    adjust(tried[i], few, usable, !K, o, 25);
+  });
+  std::vector<size_t> order;
+  for (size_t i = 0; i < starts.size(); ++i) {
+    const Attempt& a = tried[i];
+    FlowPoseCandidate cand;
+    cand.start_fov_deg = 2.0 * std::atan(0.5 * work.width / starts[i].focal) * 180.0 / M_PI;
+    cand.start_focal_px = starts[i].focal / sx;
+    cand.focal_px = a.cams.focal / sx;
+    cand.rotations = rotation_start_name(starts[i].rotation_only_px);
+    cand.rms_px = a.report.rms_px;
+    cand.score = a.ok ? a.score : -1;
+    res.candidates.push_back(cand);
+    spdlog::info(
+        "poses: flow adjustment from {:.0f} deg ({:.1f} px), {}: focal {:.1f} px, truncated "
+        "mean square error {:.4g} px^2, RMS {:.2f} px",
+        cand.start_fov_deg, cand.start_focal_px, cand.rotations, cand.focal_px, a.score,
+        cand.rms_px);
+    if (a.ok) order.push_back(i);
+  }
+  if (order.empty())
     fail(ErrorCategory::external, "flow poses: no start gave a usable bundle adjustment");
-  base.focal = best_focal;
-  res.rotation_start = rotation_start_name(best_rotation_only_px);
-  Attempt best = adjust_from(tracks, usable, base, !K, best_rotation_only_px, o, 50);
-  if (!best.ok) fail(ErrorCategory::external, "flow poses: the bundle adjustment failed");
-  res.guessed_rotations = best.guessed;
+  std::stable_sort(order.begin(), order.end(),
+                   [&](size_t a, size_t b) { return tried[a].score < tried[b].score; });
+  {
+    // Finalists: the best starts that ended in different minima (a start whose focal and error
+    // are both within 1% of a better one's ended where that one did).
+    std::vector<size_t> distinct;
+    for (size_t i : order) {
+      bool same = false;
+      for (size_t j : distinct)
+        same = same || (std::abs(tried[i].cams.focal / tried[j].cams.focal - 1) < 0.01 &&
+                        std::abs(tried[i].score / tried[j].score - 1) < 0.01);
+      if (!same) distinct.push_back(i);
+      if (distinct.size() == size_t(std::max(1, o.finalists))) break;
+    }
+    order = std::move(distinct);
+  }
+  std::vector<Attempt> finals(order.size());
+  run_side_by_side(order.size(), worker_threads(o), [&](size_t i) {
+    finals[i] = continue_from(tracks, usable, tried[order[i]]);
+    adjust(finals[i], tracks, usable, !K, o, 50);
+  });
+  size_t won = order.size();
+  for (size_t i = 0; i < order.size(); ++i) {
+    res.candidates[order[i]].final_score = finals[i].ok ? finals[i].score : -1;
+    res.candidates[order[i]].final_focal_px = finals[i].cams.focal / sx;
+    spdlog::info(
+        "poses: on every track, the start from {:.0f} deg, {}: focal {:.1f} px, truncated "
+        "mean square error {:.4g} px^2",
+        res.candidates[order[i]].start_fov_deg, res.candidates[order[i]].rotations,
+        finals[i].cams.focal / sx, finals[i].score);
+    if (finals[i].ok && (won == order.size() || finals[i].score < finals[won].score)) won = i;
+  }
+  if (won == order.size())
+    fail(ErrorCategory::external, "flow poses: the bundle adjustment failed");
+  Attempt best = std::move(finals[won]);
+  res.rotation_start = rotation_start_name(starts[order[won]].rotation_only_px);
   res.adjustment_seconds = seconds_since(ta);
+  res.guessed_rotations = best.guessed;
   res.residuals = best.report.residuals;
   res.rms_px = best.report.rms_px;
 

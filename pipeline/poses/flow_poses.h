@@ -32,6 +32,7 @@ struct FlowPoseOptions {
   int max_tracks = 15000;                         // evenly thinned beyond this
   std::vector<double> candidate_fov_deg = {45, 60, 75, 90};  // without known intrinsics
   int candidate_tracks = 3000;                               // tracks per candidate adjustment
+  int finalists = 2;  // the best candidates adjusted further on every track; the lowest error wins
   double huber_px = 1.0;
   double outlier_px = 3.0;  // observations beyond this are dropped before the last pass
   double export_px = 1.5;   // observations of exported points lie within this
@@ -49,6 +50,8 @@ struct FlowPoseCandidate {
       rotations;     // how the first rotations were chained: "essential matrix" or "rotation fit"
   double score = 0;  // mean of min(error^2, outlier_px^2) over the subset's observations; -1 failed
   double rms_px = 0;
+  // Finalists only (0 otherwise): the same after the adjustment on every track (-1 failed).
+  double final_score = 0, final_focal_px = 0;
 };
 
 struct FlowPoseResult {

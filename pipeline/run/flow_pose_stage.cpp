@@ -23,7 +23,7 @@ void run_flow_poses(const RunOptions& o, const FramesStage& f, const std::option
               {"intrinsics", K ? json{K->fx, K->fy, K->cx, K->cy, K->width, K->height} : json()},
               {"long_side", fo.long_side},
               {"frames", f.names},
-              {"version", 2}};
+              {"version", 3}};
   std::error_code ec;
   json info;
   ColmapModel model;
@@ -50,13 +50,19 @@ void run_flow_poses(const RunOptions& o, const FramesStage& f, const std::option
         r.cameras.empty() ? 0.0 : r.cameras.front().intrinsics.fx, r.focal_method, r.seconds);
     model = r.model;
     json cands = json::array();
-    for (const auto& c : r.candidates)
-      cands.push_back({{"start_fov_deg", c.start_fov_deg},
-                       {"start_focal_px", c.start_focal_px},
-                       {"focal_px", c.focal_px},
-                       {"rotations", c.rotations},
-                       {"score_px2", c.score},
-                       {"rms_px", c.rms_px}});
+    for (const auto& c : r.candidates) {
+      json cand = {{"start_fov_deg", c.start_fov_deg},
+                   {"start_focal_px", c.start_focal_px},
+                   {"focal_px", c.focal_px},
+                   {"rotations", c.rotations},
+                   {"score_px2", c.score},
+                   {"rms_px", c.rms_px}};
+      if (c.final_score != 0) {
+        cand["final_score_px2"] = c.final_score;
+        cand["final_focal_px"] = c.final_focal_px;
+      }
+      cands.push_back(cand);
+    }
     info = {{"tracks", r.tracks},
             {"residuals", r.residuals},
             {"points", r.points},

@@ -49,10 +49,7 @@ class MpiRun : public ::testing::Test {
   static fs::path work() { return dir_->path(); }
 
   static std::string run_args(const fs::path& out) {
-    json k = read_json(scene() / "intrinsics.json");
-    char intr[256];
-    std::snprintf(intr, sizeof intr, "%.17g,%.17g,%.17g,%.17g", k["fx"].get<double>(),
-                  k["fy"].get<double>(), k["cx"].get<double>(), k["cy"].get<double>());
+    const std::string intr = intrinsics_flag_value(scene() / "intrinsics.json");
     return "run " + shell_quoted(scene() / "rgb") + " -o " + shell_quoted(out) +
            " --epochs 2 --warmup 1 --width 0.0625 --depth-size 64 --no-videos --no-ply --poses " +
            shell_quoted(scene() / "poses.txt") + " --poses-format tum --intrinsics " + intr;

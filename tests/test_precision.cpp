@@ -43,10 +43,7 @@ class PrecisionClip : public ::testing::Test {
   // width 0.25 (16-64 channels: its convolutions of 16+ channels a side run in bf16).
   static std::string run_args(const fs::path& out, const std::string& precision) {
     const fs::path scene = dir_->path() / "scene";
-    json k = json::parse(std::ifstream(scene / "intrinsics.json"));
-    char intr[256];
-    std::snprintf(intr, sizeof intr, "%.17g,%.17g,%.17g,%.17g", k["fx"].get<double>(),
-                  k["fy"].get<double>(), k["cx"].get<double>(), k["cy"].get<double>());
+    const std::string intr = test::intrinsics_flag_value(scene / "intrinsics.json");
     return "run " + shell_quoted(scene / "rgb") + " -o " + shell_quoted(out) +
            " --epochs 3 --warmup 20 --width 0.25 --depth-size 64 --no-videos --no-ply --poses " +
            shell_quoted(scene / "poses.txt") + " --poses-format tum --intrinsics " + intr +

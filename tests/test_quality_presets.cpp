@@ -44,10 +44,7 @@ TEST(QualityPreset, CliAppliesThePresetToTheKnobsNotGiven) {
   CommandResult r =
       run_cvd("scene --out " + shell_quoted(scene) + " --frames 4 --width 96 --height 72");
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  const nlohmann::json k = read_json(scene / "intrinsics.json");
-  const std::string intr =
-      fmt::format("{:.17g},{:.17g},{:.17g},{:.17g}", k["fx"].get<double>(), k["fy"].get<double>(),
-                  k["cx"].get<double>(), k["cy"].get<double>());
+  const std::string intr = intrinsics_flag_value(scene / "intrinsics.json");
   // fast: its depth size (differs from the default preset's); width, epochs, warm-up given.
   const QualityPreset& fast = quality_preset("fast");
   ASSERT_NE(fast.depth_long_side, quality_preset("default").depth_long_side);

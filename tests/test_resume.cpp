@@ -56,17 +56,10 @@ class TinyClip : public ::testing::Test {
 
   // Arguments of `cvd run` on the clip into `out` (2 epochs, the smallest network).
   static std::string run_args(const fs::path& out, int epochs = 2) {
-    json k = read_json(scene() / "intrinsics.json");
-    std::string intr =
-        fmt_num(k["fx"]) + "," + fmt_num(k["fy"]) + "," + fmt_num(k["cx"]) + "," + fmt_num(k["cy"]);
+    const std::string intr = intrinsics_flag_value(scene() / "intrinsics.json");
     return "run " + q(scene() / "rgb") + " -o " + q(out) + " --epochs " + std::to_string(epochs) +
            " --warmup 1 --width 0.0625 --depth-size 64 --no-videos --no-ply --poses " +
            q(scene() / "poses.txt") + " --poses-format tum --intrinsics " + intr;
-  }
-  static std::string fmt_num(const json& v) {
-    char b[64];
-    std::snprintf(b, sizeof b, "%.17g", v.get<double>());
-    return b;
   }
 
  private:
@@ -298,10 +291,7 @@ class FlowClip : public ::testing::Test {
   // One epoch on the smallest network; flow at the full 640x480, which dominates the run time.
   static std::string run_args(const fs::path& out) {
     fs::path scene = work() / "scene";
-    json k = read_json(scene / "intrinsics.json");
-    char intr[160];
-    std::snprintf(intr, sizeof intr, "%.17g,%.17g,%.17g,%.17g", k["fx"].get<double>(),
-                  k["fy"].get<double>(), k["cx"].get<double>(), k["cy"].get<double>());
+    const std::string intr = intrinsics_flag_value(scene / "intrinsics.json");
     return "run " + q(scene / "rgb") + " -o " + q(out) +
            " --epochs 1 --warmup 1 --width 0.0625 --depth-size 64 --no-videos --no-ply --poses " +
            q(scene / "poses.txt") + " --poses-format tum --intrinsics " + intr;

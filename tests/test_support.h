@@ -3,8 +3,11 @@
 #pragma once
 #include <gtest/gtest.h>
 
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
 #include <string>
 
 #include "engine/compute_precision.h"
@@ -78,6 +81,17 @@ inline std::string shell_quoted(const std::filesystem::path& p) { return "'" + p
 // Runs the cvd CLI with the given argument string.
 inline CommandResult run_cvd(const std::string& args) {
   return run_command(cli_path() + " " + args);
+}
+
+// The value of `cvd run --intrinsics` ("fx,fy,cx,cy", full precision) for an intrinsics.json
+// (a generated scene's, or a run's output).
+inline std::string intrinsics_flag_value(const std::filesystem::path& intrinsics_json) {
+  std::ifstream in(intrinsics_json);
+  const nlohmann::json k = nlohmann::json::parse(in);
+  char v[256];
+  std::snprintf(v, sizeof v, "%.17g,%.17g,%.17g,%.17g", k.at("fx").get<double>(),
+                k.at("fy").get<double>(), k.at("cx").get<double>(), k.at("cy").get<double>());
+  return v;
 }
 
 }  // namespace cvd::test

@@ -104,11 +104,7 @@ TEST(UserMasksCli, RunLeavesMaskedPixelsOutAndRecordsIt) {
   m.colRange(0, 48).setTo(0);  // ignore the left half of two frames
   for (const char* name : {"frame_000000", "frame_000002"})
     ASSERT_TRUE(cv::imwrite((masks / (std::string(name) + ".png")).string(), m));
-  std::ifstream kf(dir.path() / "scene" / "intrinsics.json");
-  auto k = nlohmann::json::parse(kf);
-  char intr[160];
-  std::snprintf(intr, sizeof intr, "%.17g,%.17g,%.17g,%.17g", k["fx"].get<double>(),
-                k["fy"].get<double>(), k["cx"].get<double>(), k["cy"].get<double>());
+  const std::string intr = intrinsics_flag_value(dir.path() / "scene" / "intrinsics.json");
   const std::string common = "run '" + (dir.path() / "scene" / "rgb").string() +
                              "' --epochs 1 --warmup 1 --width 0.0625 --depth-size 64 --no-videos "
                              "--no-ply --poses '" +

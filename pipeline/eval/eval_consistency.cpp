@@ -10,6 +10,7 @@
 
 #include "engine/error.h"
 #include "pipeline/flow/flow_consistency.h"
+#include "pipeline/geometry/median.h"
 
 namespace cvd {
 
@@ -141,10 +142,7 @@ TrackStability track_stability(const std::vector<std::vector<Eigen::Vector3d>>& 
   r.instability = es / r.tracks;
   r.instability_centroid = ec / r.tracks;
   r.drift = ed / r.tracks;
-  if (!ratios.empty()) {
-    std::nth_element(ratios.begin(), ratios.begin() + ratios.size() / 2, ratios.end());
-    r.drift_eigen_ratio = ratios[ratios.size() / 2];
-  }
+  if (!ratios.empty()) r.drift_eigen_ratio = upper_median(std::move(ratios));
   return r;
 }
 

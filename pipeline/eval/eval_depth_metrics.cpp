@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "engine/error.h"
+#include "pipeline/geometry/median.h"
 
 namespace cvd {
 
@@ -85,16 +86,6 @@ DepthErrors depth_errors(const cv::Mat& pred, const cv::Mat& gt, const cv::Mat& 
   return r;
 }
 
-static double median_of(std::vector<double>& v) {
-  if (v.empty()) return 1.0;
-  size_t mid = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + mid, v.end());
-  double hi = v[mid];
-  if (v.size() % 2) return hi;
-  double lo = *std::max_element(v.begin(), v.begin() + mid);
-  return 0.5 * (lo + hi);
-}
-
 static void append_ratios(const cv::Mat& pred, const cv::Mat& gt, const cv::Mat& mask,
                           std::vector<double>& out) {
   for (int y = 0; y < gt.rows; ++y) {
@@ -110,7 +101,7 @@ DepthAlignmentFit fit_median_scale(const cv::Mat& pred, const cv::Mat& gt, const
   check_pair(pred, gt, "fit_median_scale");
   std::vector<double> ratios;
   append_ratios(pred, gt, mask, ratios);
-  return {median_of(ratios), 0.0};
+  return {median(std::move(ratios), 1.0), 0.0};
 }
 
 DepthAlignmentFit fit_lstsq_scale_shift(const cv::Mat& pred, const cv::Mat& gt,
@@ -196,7 +187,7 @@ DepthEvalResult evaluate_video_depth(const std::vector<cv::Mat>& preds,
   if (alignment == DepthAlignment::median_video) {
     std::vector<double> ratios;
     for (size_t i = 0; i < n; ++i) append_ratios(ps[i], gs[i], masks[i], ratios);
-    video_fit = {median_of(ratios), 0.0};
+    video_fit = {median(std::move(ratios), 1.0), 0.0};
   }
   std::vector<float> pixel_errors;
   double sums[7] = {0, 0, 0, 0, 0, 0, 0};

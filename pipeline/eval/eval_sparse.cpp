@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "engine/error.h"
+#include "pipeline/geometry/median.h"
 #include "pipeline/io/atomic_file.h"
 
 namespace fs = std::filesystem;
@@ -19,12 +20,6 @@ namespace cvd {
 namespace {
 
 constexpr const char* kHeader = "frame,width,height,u,v,z";
-
-double median_of(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
-}
 
 }  // namespace
 
@@ -126,12 +121,12 @@ SparseDepthEval evaluate_sparse_depth(const std::map<std::string, SparseDepthFra
   std::vector<double> all_ratios;
   for (const auto& fp : per)
     for (size_t k = 0; k < fp.z.size(); ++k) all_ratios.push_back(fp.d[k] / fp.z[k]);
-  const double video_scale = median_of(all_ratios);
+  const double video_scale = upper_median(all_ratios);
   int64_t within = 0;
   for (const auto& fp : per) {
     std::vector<double> ratios;
     for (size_t k = 0; k < fp.z.size(); ++k) ratios.push_back(fp.d[k] / fp.z[k]);
-    const double s = median_of(ratios);
+    const double s = upper_median(ratios);
     double sum = 0, sum_video = 0;
     for (size_t k = 0; k < fp.z.size(); ++k) {
       const double e = s * fp.z[k];

@@ -4,17 +4,11 @@
 #include <cmath>
 
 #include "engine/error.h"
+#include "pipeline/geometry/median.h"
 
 namespace cvd {
 
 namespace {
-
-double median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  const size_t mid = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + mid, v.end());
-  return v[mid];
-}
 
 // Weighted least squares of y ~ a x + b; false when degenerate (no spread in x).
 bool weighted_line(const std::vector<double>& x, const std::vector<double>& y,
@@ -55,14 +49,14 @@ DisparityAffineFit fit_disparity_affine(const std::vector<double>& raw,
   if (x.empty())
     fail(ErrorCategory::numerical,
          "disparity calibration: no sparse point has a positive depth and network output");
-  const double median_disparity = median(y);
+  const double median_disparity = upper_median(y);
   fit.floor = 1e-3 * median_disparity;
   std::vector<double> w(x.size(), 1.0), r(x.size());
   double a = 0, b = 0;
   bool ok = weighted_line(x, y, w, a, b);
   for (int it = 0; ok && it < 50; ++it) {
     for (size_t i = 0; i < x.size(); ++i) r[i] = std::abs(a * x[i] + b - y[i]);
-    const double threshold = std::max(1.5 * 1.4826 * median(r), 1e-9 * median_disparity);
+    const double threshold = std::max(1.5 * 1.4826 * upper_median(r), 1e-9 * median_disparity);
     for (size_t i = 0; i < x.size(); ++i) w[i] = r[i] <= threshold ? 1.0 : threshold / r[i];
     double a2 = a, b2 = b;
     ok = weighted_line(x, y, w, a2, b2);
@@ -75,14 +69,14 @@ DisparityAffineFit fit_disparity_affine(const std::vector<double>& raw,
   if (!ok || !(a > 0)) {
     std::vector<double> ratio(x.size());
     for (size_t i = 0; i < x.size(); ++i) ratio[i] = y[i] / x[i];
-    a = median(ratio);
+    a = upper_median(ratio);
     b = 0;
     fit.scale_only = true;
   }
   fit.scale = a;
   fit.shift = b;
   for (size_t i = 0; i < x.size(); ++i) r[i] = std::abs(a * x[i] + b - y[i]);
-  fit.residual_mad = median(r);
+  fit.residual_mad = upper_median(r);
   const double threshold = std::max(1.5 * 1.4826 * fit.residual_mad, 1e-9 * median_disparity);
   for (double v : r) fit.inliers += v <= threshold;
   return fit;

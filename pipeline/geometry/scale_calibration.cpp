@@ -6,6 +6,7 @@
 #include <limits>
 
 #include "engine/error.h"
+#include "pipeline/geometry/median.h"
 
 namespace cvd {
 namespace {
@@ -32,15 +33,6 @@ double sample_depth(const cv::Mat& d, double u, double v, double min_depth) {
   int yn = std::clamp(int(std::lround(v)), 0, d.rows - 1);
   double n = depth_at(d, xn, yn);
   return n > min_depth ? n : nan;
-}
-
-double median(std::vector<double> v) {
-  size_t m = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + m, v.end());
-  double hi = v[m];
-  if (v.size() % 2 == 1) return hi;
-  double lo = *std::max_element(v.begin(), v.begin() + m);
-  return 0.5 * (lo + hi);
 }
 
 }  // namespace

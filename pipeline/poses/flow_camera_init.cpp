@@ -10,15 +10,15 @@
 #include <opencv2/core/eigen.hpp>
 
 #include "engine/error.h"
+#include "pipeline/geometry/median.h"
 
 namespace cvd {
 
-namespace {
-
-// Unit ray of a pixel in camera coordinates.
 Eigen::Vector3d camera_ray(const TrackCameras& cams, double x, double y) {
   return Eigen::Vector3d((x - cams.cx) / cams.focal, (y - cams.cy) / cams.focal, 1.0).normalized();
 }
+
+namespace {
 
 // The rotation Q minimising sum w_i |a_i - Q b_i|^2 (Kabsch), reweighted a few times with Huber
 // weights of scale `robust` (radians).
@@ -56,8 +56,7 @@ Eigen::Matrix3d relative_rotation(const std::vector<cv::Point2d>& p,
   const Eigen::Matrix3d Q_rot = robust_rotation_fit(a, b, 1.5 / cams.focal);
   std::vector<double> residual(a.size());
   for (size_t i = 0; i < a.size(); ++i) residual[i] = (a[i] - Q_rot * b[i]).norm() * cams.focal;
-  std::nth_element(residual.begin(), residual.begin() + long(residual.size() / 2), residual.end());
-  if (residual[residual.size() / 2] < rotation_only_px) return Q_rot;
+  if (upper_median(std::move(residual)) < rotation_only_px) return Q_rot;
   const cv::Point2d pp(cams.cx, cams.cy);
   cv::Mat inliers;
   cv::Mat E = cv::findEssentialMat(p, q, cams.focal, pp, cv::USAC_ACCURATE, 0.999, 1.0, inliers);
@@ -166,11 +165,7 @@ int place_points_in_front(const std::vector<PixelTrack>& tracks, const std::vect
     if (!behind[t] && !tracks[t].observations.empty())
       depths.push_back(depth_in(size_t(tracks[t].observations.front().frame), points[t]));
   }
-  double median = 1.0;
-  if (!depths.empty()) {
-    std::nth_element(depths.begin(), depths.begin() + long(depths.size() / 2), depths.end());
-    median = depths[depths.size() / 2];
-  }
+  const double median = upper_median(std::move(depths), 1.0);
   int moved = 0;
   for (size_t t = 0; t < tracks.size(); ++t) {
     if (!behind[t]) continue;

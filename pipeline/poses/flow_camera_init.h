@@ -14,6 +14,9 @@
 
 namespace cvd {
 
+// Unit ray of pixel (x, y) in camera coordinates.
+Eigen::Vector3d camera_ray(const TrackCameras& cams, double x, double y);
+
 // cams.R gets the chained rotations (frame 0 of the chain: identity). Each link: the rotation
 // alone where it explains the pair within rotation_only_px (median; 0: never, infinity: always),
 // else the essential matrix's.

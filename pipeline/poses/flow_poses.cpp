@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "engine/error.h"
+#include "pipeline/geometry/median.h"
 #include "pipeline/poses/flow_camera_init.h"
 #include "pipeline/poses/track_bundle_adjustment.h"
 
@@ -358,9 +359,7 @@ FlowPoseResult estimate_flow_poses(const std::vector<std::string>& names,
       if (!registered[k] || reprojection_error_px(best.cams, best.points[t], ob) > o.export_px)
         continue;
       inliers[t].push_back(ob);
-      rays.push_back(best.cams.R[k] * Eigen::Vector3d((ob.x - best.cams.cx) / best.cams.focal,
-                                                      (ob.y - best.cams.cy) / best.cams.focal, 1)
-                                          .normalized());
+      rays.push_back(best.cams.R[k] * camera_ray(best.cams, ob.x, ob.y));
     }
     double min_cos = 1.0;
     for (size_t i = 0; i < rays.size(); ++i)
@@ -376,10 +375,7 @@ FlowPoseResult estimate_flow_poses(const std::vector<std::string>& names,
     std::vector<double> p;
     for (size_t t = 0; t < tracks.size(); ++t)
       if (inliers[t].size() >= 2) p.push_back(parallax[t]);
-    if (!p.empty()) {
-      std::nth_element(p.begin(), p.begin() + long(p.size() / 2), p.end());
-      res.median_parallax_deg = p[p.size() / 2];
-    }
+    res.median_parallax_deg = upper_median(std::move(p));
   }
   // Units: the median depth of the exported points is 1.
   std::vector<double> depths;
@@ -390,11 +386,8 @@ FlowPoseResult estimate_flow_poses(const std::vector<std::string>& names,
                         (best.points[t] - best.cams.c[size_t(ob.frame)]))
                            .z());
   }
-  double unit = 1.0;
-  if (!depths.empty()) {
-    std::nth_element(depths.begin(), depths.begin() + long(depths.size() / 2), depths.end());
-    if (depths[depths.size() / 2] > 0) unit = depths[depths.size() / 2];
-  }
+  double unit = upper_median(std::move(depths), 1.0);
+  if (!(unit > 0)) unit = 1.0;
 
   // ---- cameras and model at the frames' resolution ----
   Intrinsics Kout;

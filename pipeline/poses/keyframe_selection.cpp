@@ -9,6 +9,7 @@
 #include <set>
 
 #include "engine/error.h"
+#include "pipeline/geometry/median.h"
 
 namespace cvd {
 
@@ -75,8 +76,7 @@ std::vector<double> consecutive_motion(const std::vector<cv::Mat>& frames_bgr, i
         cv::Vec2f f = flow.at<cv::Vec2f>(y, x);
         mag.push_back(std::hypot(f[0], f[1]));
       }
-    std::nth_element(mag.begin(), mag.begin() + mag.size() / 2, mag.end());
-    motion[k] = mag[mag.size() / 2] / long_side;
+    motion[k] = upper_median(mag) / long_side;
     prev = cur;
   }
   return motion;

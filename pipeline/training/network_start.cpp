@@ -12,16 +12,11 @@
 #include "engine/error.h"
 #include "engine/ops.h"
 #include "engine/random.h"
+#include "pipeline/geometry/median.h"
 
 namespace cvd {
 
 namespace {
-
-double median_of(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
-}
 
 // The warm-up's training and held-out points, frame by frame.
 struct SparseSplit {
@@ -140,7 +135,7 @@ nlohmann::json start_default_network(DepthNet& net, const std::function<Tensor(i
   nlohmann::json info;
   std::vector<double> all;
   for (const SparseDepth& s : sparse) all.insert(all.end(), s.z.begin(), s.z.end());
-  double level_depth = median_of(all);
+  double level_depth = upper_median(all);
   if (all.empty()) {
     level_depth = o.fallback_depth;
     const std::string w = fmt::format(

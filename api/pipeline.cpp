@@ -42,6 +42,7 @@ RunOptions to_run_options(const PipelineOptions& p) {
   o.min_valid_fraction = p.min_valid_fraction;
   o.fb_threshold_px = p.fb_threshold_px;
   o.epochs = p.epochs;
+  o.steps = p.steps;
   o.batch_pairs = p.batch_pairs;
   o.lr = p.lr;
   o.lambda_disparity = p.lambda_disparity;

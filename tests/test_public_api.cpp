@@ -206,6 +206,7 @@ TEST(PublicApi, PipelineRejectsUnknownSettingsBeforeCreatingAnything) {
       [](cvd::PipelineOptions& o) { o.sparse_points = "sift"; },
       [](cvd::PipelineOptions& o) { o.poses_source = "slam"; },
       [](cvd::PipelineOptions& o) { o.colmap_keyframes = "1"; },
+      [](cvd::PipelineOptions& o) { o.steps = -1; },
       [](cvd::PipelineOptions& o) {
         o.depth_formats = {"pfm", "tiff"};
       }};

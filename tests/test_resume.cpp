@@ -255,6 +255,46 @@ TEST_F(TinyClip, RefinedCamerasContinueFromTheCheckpointToTheSameResult) {
   EXPECT_LE(worst, 1e-5) << "largest relative depth difference continued vs uninterrupted";
 }
 
+// A step budget (--steps) draws each epoch's batches from one running shuffle of the pairs,
+// carried in the checkpoint: one epoch, then a rerun with two (the same steps per epoch), ends
+// where an uninterrupted two-epoch run does. The clip has more pairs than two steps take, so the
+// second epoch's batches run past the end of the first shuffle.
+TEST_F(TinyClip, AStepBudgetContinuesFromTheCheckpointToTheSameResult) {
+  fs::path ref = work() / "budget_uninterrupted";
+  CommandResult r = run_cvd(run_args(ref, 2) + " --steps 4");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const json a = read_json(ref / "run.json");
+  EXPECT_EQ(a["training"]["steps_per_epoch"], 2) << a["training"].dump(2);
+  EXPECT_EQ(a["training"]["pairs_per_epoch"], "step budget (--steps)");
+  const int pairs = a["pairs"]["kept"].get<int>();
+  ASSERT_GT(pairs, 2 * 4) << "the clip must have more pairs than one epoch of 2 steps x 4 pairs";
+  ASSERT_LT(pairs, 4 * 4) << "the second epoch must run past the first shuffle";
+
+  fs::path out = work() / "budget_continued";
+  r = run_cvd(run_args(out, 1) + " --steps 2");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_EQ(read_json(out / "run.json")["training"]["steps_per_epoch"], 2);
+  r = run_cvd(run_args(out, 2) + " --steps 4");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const json b = read_json(out / "run.json");
+  EXPECT_EQ(b["training"]["resumed_from_epoch"], 1) << r.output;
+  auto la = a["training"]["epoch_losses"].get<std::vector<double>>();
+  auto lb = b["training"]["epoch_losses"].get<std::vector<double>>();
+  ASSERT_EQ(la.size(), 2u);
+  ASSERT_EQ(lb.size(), 2u);
+  for (size_t e = 0; e < la.size(); ++e) EXPECT_NEAR(lb[e], la[e], 1e-5 * std::abs(la[e])) << e;
+  int files = 0;
+  double worst = max_relative_depth_difference(ref, out, files);
+  EXPECT_EQ(files, 6);
+  EXPECT_LE(worst, 1e-5) << "largest relative depth difference continued vs uninterrupted";
+
+  // Without the budget an epoch is every pair: another training, so the checkpoint is not used.
+  r = run_cvd(run_args(out, 2));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("made with other settings"), std::string::npos) << r.output;
+  EXPECT_EQ(read_json(out / "run.json")["training"]["steps_per_epoch"], (pairs + 3) / 4);
+}
+
 // Flow pairs finished in `out`: each pair's .json is written last (atomically); a dot-named
 // .json is a temporary still being written (or left by a kill), not a finished pair.
 std::map<std::string, fs::file_time_type> finished_flow_pairs(const fs::path& out) {

@@ -77,7 +77,11 @@ struct PipelineOptions {
   float fb_threshold_px = 1.0f;       ///< --fb-threshold
 
   // Training (<= 0: the architecture's default)
-  int epochs = 16;               ///< --epochs
+  int epochs = 16;  ///< --epochs
+  /// --steps: > 0, the training's optimizer steps in all (a budget for long clips, rounded up to
+  /// a multiple of epochs; each epoch draws its batches from a running shuffle of the pairs);
+  /// 0: every pair once per epoch
+  int steps = 0;
   int batch_pairs = 4;           ///< --batch
   double lr = 0;                 ///< --lr
   double lambda_disparity = -1;  ///< --lambda

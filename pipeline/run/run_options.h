@@ -69,6 +69,10 @@ struct RunOptions {
 
   // Training (defaults per architecture when <= 0)
   int epochs = 16;
+  // > 0: a step budget, the whole training's optimizer steps (rounded up to a multiple of
+  // epochs): each epoch takes steps / epochs batches from a running shuffle of the pairs instead
+  // of every pair (pipeline/training/test_time_training.h). 0: every pair once per epoch.
+  int steps = 0;
   int batch_pairs = 4;
   double lr = 0;
   double lambda_disparity = -1;

@@ -213,6 +213,7 @@ RunResult run_pipeline(const RunOptions& o) {
   CVD_CHECK(o.sparse_points == "flow" || o.sparse_points == "colmap" || o.sparse_points == "auto",
             "sparse_points must be flow, colmap or auto, got '{}'", o.sparse_points);
   parse_keyframe_mode(o.colmap_keyframes, "colmap_keyframes");
+  CVD_CHECK(o.steps >= 0, "steps must be >= 0 (0: every pair once per epoch), got {}", o.steps);
   CVD_CHECK(o.pair_storage == "auto" || o.pair_storage == "memory" || o.pair_storage == "stream",
             "pair_storage must be auto, memory or stream, got '{}'", o.pair_storage);
   for (const std::string& f : o.depth_formats)
@@ -393,6 +394,7 @@ RunResult run_pipeline(const RunOptions& o) {
   const PairSource& pairs = stream ? static_cast<const PairSource&>(pair_loader) : *in_memory;
   TrainingOptions to;
   to.epochs = o.epochs;
+  if (o.steps > 0 && o.epochs > 0) to.steps_per_epoch = (o.steps + o.epochs - 1) / o.epochs;
   to.batch_pairs = o.batch_pairs;
   to.lr = o.lr > 0 ? o.lr : default_learning_rate(net->arch());
   to.lambda_disparity = o.lambda_disparity >= 0 ? o.lambda_disparity : default_lambda(net->arch());
@@ -405,6 +407,7 @@ RunResult run_pipeline(const RunOptions& o) {
                        {"lr", to.lr},
                        {"lambda", to.lambda_disparity},
                        {"batch_pairs", to.batch_pairs},
+                       {"steps_per_epoch", to.steps_per_epoch},
                        {"seed", to.seed},
                        {"warmup_steps", o.warmup_steps},
                        {"masks", o.masks.string()},
@@ -550,19 +553,25 @@ RunResult run_pipeline(const RunOptions& o) {
                    {"storage", stream ? "streamed from cache/flow" : "memory"}};
   info["processes"] = {{"count", pg.size()}, {"group", pg.name()}};
   if (pg.size() > 1) info["processes"]["allreduce_bytes_per_step"] = tr.bytes_per_step;
-  info["training"] = {{"epochs", o.epochs},
-                      {"batch_pairs", to.batch_pairs},
-                      {"lr", to.lr},
-                      {"lambda", to.lambda_disparity},
-                      {"seed", o.seed},
-                      {"precision", precision_name(precision)},
-                      {"precision_unit",
-                       precision == ComputePrecision::bf16 ? bf16_unit() : std::string("f32 FMA")},
-                      {"epoch_losses", tr.epoch_losses},
-                      {"skipped_steps", tr.skipped_steps},
-                      {"resumed_from_epoch", tr.resumed_from_epoch},
-                      {"geometric_loss_before", res.initial_loss},
-                      {"geometric_loss_after", res.final_loss}};
+  info["training"] = {
+      {"epochs", o.epochs},
+      {"steps_per_epoch",
+       to.steps_per_epoch > 0
+           ? to.steps_per_epoch
+           : static_cast<int>((res.num_pairs + to.batch_pairs - 1) / to.batch_pairs)},
+      {"pairs_per_epoch", to.steps_per_epoch > 0 ? "step budget (--steps)" : "every pair"},
+      {"batch_pairs", to.batch_pairs},
+      {"lr", to.lr},
+      {"lambda", to.lambda_disparity},
+      {"seed", o.seed},
+      {"precision", precision_name(precision)},
+      {"precision_unit",
+       precision == ComputePrecision::bf16 ? bf16_unit() : std::string("f32 FMA")},
+      {"epoch_losses", tr.epoch_losses},
+      {"skipped_steps", tr.skipped_steps},
+      {"resumed_from_epoch", tr.resumed_from_epoch},
+      {"geometric_loss_before", res.initial_loss},
+      {"geometric_loss_after", res.final_loss}};
   info["timings_s"] = timings;
   // Peak resident memory of this process and of the largest subprocess (COLMAP, ffmpeg) so far;
   // a resumed run reports its own.

@@ -34,6 +34,10 @@ struct Checkpoint {
   int skipped = 0;
   std::string key;
   nlohmann::json cameras;  // CameraRefinement::state(), null when cameras are not refined
+  // Steps per epoch set (TrainingOptions::steps_per_epoch): the running shuffle of the pairs and
+  // how far the epochs so far have drawn from it.
+  std::vector<size_t> order;
+  size_t cursor = 0;
 };
 
 fs::path weights_path(const fs::path& dir, int epoch) {
@@ -54,6 +58,10 @@ void save_checkpoint(const fs::path& dir, DepthNet& net, const Adam& adam, const
                       {"skipped_steps", c.skipped},
                       {"key", c.key}};
   if (!c.cameras.is_null()) j["cameras"] = c.cameras;
+  if (!c.order.empty()) {
+    j["pair_order"] = c.order;
+    j["pair_cursor"] = c.cursor;
+  }
   write_text_file(dir / "checkpoint.json", j.dump(2));
   for (int e = 0; e < c.epoch; ++e) {
     std::error_code ec;
@@ -74,12 +82,16 @@ bool load_checkpoint(const fs::path& dir, DepthNet& net, Adam& adam, Checkpoint&
     c.losses = j.at("epoch_losses").get<std::vector<double>>();
     c.skipped = j.at("skipped_steps").get<int>();
     if (j.contains("cameras")) c.cameras = j.at("cameras");
+    if (j.contains("pair_order")) {
+      c.order = j.at("pair_order").get<std::vector<size_t>>();
+      c.cursor = j.at("pair_cursor").get<size_t>();
+    }
     const std::string stored = j.value("key", std::string());
     if (stored != c.key) {
       spdlog::warn(
           "training: the checkpoint in {} was made with other settings; training starts over",
           dir.string());
-      c = Checkpoint{0, {}, {}, 0, c.key, nullptr};
+      c = Checkpoint{0, {}, {}, 0, c.key, nullptr, {}, 0};
       return false;
     }
   } catch (const nlohmann::json::exception& e) {
@@ -186,7 +198,8 @@ double evaluate_geometric_loss(DepthNet& net, const std::function<Tensor(int)>& 
 TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& load_frame,
                                const PairSource& pairs, const TrainingOptions& o) {
   CVD_CHECK(pairs.size() > 0, "test-time training needs at least one frame pair");
-  CVD_CHECK(o.batch_pairs >= 1 && o.epochs >= 0 && o.lr > 0, "bad training options");
+  CVD_CHECK(o.batch_pairs >= 1 && o.epochs >= 0 && o.lr > 0 && o.steps_per_epoch >= 0,
+            "bad training options");
   AdamOptions ao;
   ao.lr = o.lr;
   ao.beta1 = 0.9;
@@ -222,22 +235,47 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
   std::vector<Tensor> trained = net.parameters();
   if (o.cameras)
     for (const Tensor& t : camera_parameters(*o.cameras)) trained.push_back(t);
-  std::vector<size_t> order(pairs.size());
-  int steps_per_epoch = static_cast<int>((pairs.size() + o.batch_pairs - 1) / o.batch_pairs);
+  const size_t bp = static_cast<size_t>(o.batch_pairs);
+  const bool budget = o.steps_per_epoch > 0;
+  const int steps_per_epoch =
+      budget ? o.steps_per_epoch : static_cast<int>((pairs.size() + bp - 1) / bp);
+  // A step budget draws its batches from one running shuffle (every pair once before any pair
+  // again), carried across epochs and checkpoints.
+  std::vector<size_t> order = ck.order;
+  size_t cursor = ck.cursor;
+  if (budget && order.size() != pairs.size()) {
+    order.resize(pairs.size());
+    cursor = pairs.size();  // shuffled on the first draw
+  }
   for (int epoch = ck.epoch; epoch < o.epochs; ++epoch) {
     // The cameras join after their start epoch (step size 0 before; Adam's moments stay zero).
     for (size_t g = 0; g < camera_lrs.size(); ++g)
       adam.set_lr(camera_groups_from + g,
                   epoch >= o.cameras->options().start_epoch ? camera_lrs[g] : 0.0);
-    for (size_t k = 0; k < order.size(); ++k) order[k] = k;
-    std::shuffle(order.begin(), order.end(), rng.engine());
+    // The pair indices of each step of this epoch.
+    std::vector<std::vector<size_t>> batches(static_cast<size_t>(steps_per_epoch));
+    if (!budget) {
+      std::vector<size_t> shuffled(pairs.size());
+      for (size_t k = 0; k < shuffled.size(); ++k) shuffled[k] = k;
+      std::shuffle(shuffled.begin(), shuffled.end(), rng.engine());
+      for (size_t k = 0; k < shuffled.size(); ++k) batches[k / bp].push_back(shuffled[k]);
+    } else {
+      for (auto& b : batches)
+        while (b.size() < std::min(bp, pairs.size())) {
+          if (cursor >= order.size()) {
+            for (size_t k = 0; k < order.size(); ++k) order[k] = k;
+            std::shuffle(order.begin(), order.end(), rng.engine());
+            cursor = 0;
+          }
+          b.push_back(order[cursor++]);
+        }
+    }
     double sum = 0;
     int counted = 0;
     // The pairs of step s, loaded on a background thread one step ahead.
-    auto load_batch = [&pairs, &order, bp = size_t(o.batch_pairs)](size_t s) {
+    auto load_batch = [&pairs, &batches](size_t s) {
       std::vector<TrainingPair> b;
-      for (size_t k = s * bp; k < std::min(order.size(), (s + 1) * bp); ++k)
-        b.push_back(pairs.load(order[k]));
+      for (size_t k : batches[s]) b.push_back(pairs.load(k));
       return b;
     };
     std::future<std::vector<TrainingPair>> next =
@@ -287,6 +325,10 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
       ck.rng_state = rng.state();
       ck.losses = result.epoch_losses;
       ck.skipped = result.skipped_steps;
+      if (budget) {
+        ck.order = order;
+        ck.cursor = cursor;
+      }
       if (o.cameras) ck.cameras = o.cameras->state();
       save_checkpoint(o.checkpoint_dir, net, adam, ck);
     }

@@ -19,6 +19,10 @@ namespace cvd {
 struct TrainingOptions {
   int epochs = 20;
   int batch_pairs = 4;
+  // 0: an epoch takes every pair once. > 0: an epoch is this many steps, their pairs drawn from
+  // one running shuffle (every pair once before any pair again, carried across epochs), so that
+  // a long clip's thousands of pairs need not all be seen per epoch (a step budget).
+  int steps_per_epoch = 0;
   double lr = 4e-4;
   double lambda_disparity = 0.1;
   uint64_t seed = 1;

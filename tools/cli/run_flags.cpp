@@ -102,6 +102,11 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s, bool grou
                 "Drop pairs keeping fewer consistent pixels than this fraction");
   c->add_option("--fb-threshold", o.fb_threshold_px, "Forward-backward consistency threshold (px)");
   s.epochs = c->add_option("--epochs", o.epochs, "Training epochs");
+  c->add_option("--steps", o.steps,
+                "Training steps in all, a budget for long clips (rounded up to a multiple of "
+                "--epochs; each epoch draws its batches from a running shuffle of the pairs); 0: "
+                "every pair once per epoch")
+      ->check(CLI::NonNegativeNumber);
   c->add_option("--batch", o.batch_pairs, "Frame pairs per training step")
       ->check(CLI::PositiveNumber);
   // The per-architecture defaults, from the architecture table.

@@ -246,6 +246,26 @@ TEST(Convert, TruncatedAndCorruptFilesAreRejectedNamingTheFile) {
   }
 }
 
+// Well-formed ModelProtos whose one tensor is impossible (tools/reference/export_onnx.py
+// --bad-tensors; the fuzzer's findings rebuilt as valid protobuf, so that they reach the checks
+// after decoding): each is one Error(format) naming the file, the tensor and the cause, raised
+// before any allocation the shape asks for.
+TEST(Convert, ImpossibleTensorsAreRefusedNamingTheCause) {
+  const fs::path dir = onnx_dir() / "bad_tensors";
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"impossibly_large_shape", "tensor 'w' has an impossibly large shape"},
+      {"zero_dim_with_huge_strides", "tensor 'w' has an impossibly large shape"},
+      {"negative_dimension", "tensor 'w' has negative dimension -1"},
+      {"float_data_shorter_than_shape", "holds 1 values in float_data"},
+      {"raw_data_shorter_than_shape", "holds 2 values in raw_data"},
+      {"int64_raw_data_of_odd_length", "holds 1 values in raw_data"},
+  };
+  for (const auto& [name, needle] : cases) {
+    SCOPED_TRACE(name);
+    expect_format_error(dir / (name + ".onnx"), needle);
+  }
+}
+
 TEST(Convert, ExternalDataIsRefusedWithAFix) {
   const fs::path file = onnx_dir() / "external_data.onnx";
   try {

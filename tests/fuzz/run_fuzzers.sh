@@ -22,7 +22,8 @@ TARGETS=("$@")
 FLAGS=(-std=c++20 -g -O1 -fno-omit-frame-pointer -fsanitize=address,undefined
        -fno-sanitize-recover=undefined -I"$ROOT" -I"$ROOT/include" -isystem /usr/include/eigen3
        -isystem /usr/include/opencv4 -DCVD_VERSION=\"fuzz\" -DFMT_SHARED -DSPDLOG_COMPILED_LIB
-       -DSPDLOG_FMT_EXTERNAL -DSPDLOG_SHARED_LIB -Wno-unknown-pragmas)
+       -DSPDLOG_FMT_EXTERNAL -DSPDLOG_SHARED_LIB -DONNX_ML=1 -DONNX_NAMESPACE=onnx
+       -Wno-unknown-pragmas)
 LIBS=(-lopencv_core -lfmt -lspdlog -lz -lpthread)
 
 # The sources each target needs (the .cvdw and ONNX readers need the tensor engine, which links
@@ -63,7 +64,10 @@ for t in "${TARGETS[@]}"; do
   objs=()
   for s in $(sources_for "$t") tests/fuzz/fuzz_$t.cpp; do objs+=("$(object_for "$s")"); done
   extra=()
-  case $t in cvdw | onnx) extra=(-fopenmp) ;; esac
+  case $t in
+    cvdw) extra=(-fopenmp) ;;
+    onnx) extra=(-fopenmp -lonnx_proto -lprotobuf) ;;
+  esac
   "$CXX" "${FLAGS[@]}" -fsanitize=fuzzer "${objs[@]}" "${LIBS[@]}" "${extra[@]}" -o "$BUILD/fuzz_$t"
 done
 

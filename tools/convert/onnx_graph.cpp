@@ -1,8 +1,10 @@
 #include "tools/convert/onnx_graph.h"
 
+#include <onnx/onnx_pb.h>
+
+#include <climits>
 #include <cstring>
 #include <fstream>
-#include <functional>
 #include <limits>
 
 #include "engine/error.h"
@@ -11,157 +13,9 @@ namespace cvd {
 
 namespace {
 
-// Protobuf wire types.
-enum WireType : uint32_t { kVarint = 0, kFixed64 = 1, kLengthDelimited = 2, kFixed32 = 5 };
-
-// A bounded view of the file's bytes with the position and the field path (for messages).
-class WireReader {
- public:
-  WireReader(std::string_view bytes, size_t base, const std::filesystem::path* file,
-             std::string context)
-      : bytes_(bytes), base_(base), file_(file), context_(std::move(context)) {}
-
-  bool done() const { return pos_ >= bytes_.size(); }
-  size_t offset() const { return base_ + pos_; }
-  const std::string& context() const { return context_; }
-  const std::filesystem::path& file() const { return *file_; }
-
-  [[noreturn]] void corrupt(const std::string& what) const {
-    fail(ErrorCategory::format, "{}: not a valid ONNX model: {} at byte {} (in {})",
-         file_->string(), what, offset(), context_);
-  }
-
-  uint64_t varint() {
-    uint64_t v = 0;
-    for (int shift = 0; shift < 64; shift += 7) {
-      if (pos_ >= bytes_.size()) corrupt("truncated varint");
-      const uint8_t b = static_cast<uint8_t>(bytes_[pos_++]);
-      v |= static_cast<uint64_t>(b & 0x7f) << shift;
-      if (!(b & 0x80)) return v;
-    }
-    corrupt("varint longer than 10 bytes");
-  }
-  // Reads a field key; returns false at the end of the message.
-  bool key(uint32_t& field, uint32_t& wire) {
-    if (done()) return false;
-    const uint64_t k = varint();
-    field = static_cast<uint32_t>(k >> 3);
-    wire = static_cast<uint32_t>(k & 7);
-    if (field == 0) corrupt("field number 0");
-    return true;
-  }
-  std::string_view bytes_field() {
-    const uint64_t n = varint();
-    if (n > bytes_.size() - pos_)
-      corrupt(fmt::format("length {} runs past the end of the data (file truncated?)", n));
-    std::string_view v = bytes_.substr(pos_, n);
-    pos_ += n;
-    return v;
-  }
-  // A sub-message reader for a length-delimited field; `what` extends the context.
-  WireReader message(const std::string& what) {
-    const size_t start = pos_;
-    std::string_view v = bytes_field();
-    return WireReader(v, base_ + start + (pos_ - start - v.size()), file_, context_ + "." + what);
-  }
-  uint32_t fixed32() {
-    if (bytes_.size() - pos_ < 4) corrupt("truncated fixed32");
-    uint32_t v;
-    std::memcpy(&v, bytes_.data() + pos_, 4);
-    pos_ += 4;
-    return v;
-  }
-  uint64_t fixed64() {
-    if (bytes_.size() - pos_ < 8) corrupt("truncated fixed64");
-    uint64_t v;
-    std::memcpy(&v, bytes_.data() + pos_, 8);
-    pos_ += 8;
-    return v;
-  }
-  void skip(uint32_t wire) {
-    switch (wire) {
-      case kVarint:
-        varint();
-        return;
-      case kFixed64:
-        fixed64();
-        return;
-      case kLengthDelimited:
-        bytes_field();
-        return;
-      case kFixed32:
-        fixed32();
-        return;
-      default:
-        corrupt(fmt::format("unsupported wire type {}", wire));
-    }
-  }
-  void expect(uint32_t wire, uint32_t wanted, const char* field) {
-    if (wire != wanted)
-      corrupt(fmt::format("field '{}' has wire type {} (expected {})", field, wire, wanted));
-  }
-  std::string string_field(uint32_t wire, const char* field) {
-    expect(wire, kLengthDelimited, field);
-    return std::string(bytes_field());
-  }
-  int64_t int_field(uint32_t wire, const char* field) {
-    expect(wire, kVarint, field);
-    return static_cast<int64_t>(varint());
-  }
-  // A repeated int64 / int32 / uint64 element or packed run, appended to `out`.
-  void ints_field(uint32_t wire, std::vector<int64_t>& out, const char* field) {
-    if (wire == kVarint) {
-      out.push_back(static_cast<int64_t>(varint()));
-    } else if (wire == kLengthDelimited) {
-      WireReader packed = message(field);
-      while (!packed.done()) out.push_back(static_cast<int64_t>(packed.varint()));
-    } else {
-      corrupt(fmt::format("field '{}' has wire type {}", field, wire));
-    }
-  }
-  // A repeated float element or packed run.
-  void floats_field(uint32_t wire, std::vector<float>& out, const char* field) {
-    auto to_float = [](uint32_t bits) {
-      float f;
-      std::memcpy(&f, &bits, 4);
-      return f;
-    };
-    if (wire == kFixed32) {
-      out.push_back(to_float(fixed32()));
-    } else if (wire == kLengthDelimited) {
-      std::string_view v = bytes_field();
-      if (v.size() % 4) corrupt(fmt::format("packed '{}' of {} bytes", field, v.size()));
-      const size_t n0 = out.size();
-      out.resize(n0 + v.size() / 4);
-      if (!v.empty()) std::memcpy(out.data() + n0, v.data(), v.size());  // no null memcpy
-    } else {
-      corrupt(fmt::format("field '{}' has wire type {}", field, wire));
-    }
-  }
-  void doubles_field(uint32_t wire, std::vector<double>& out, const char* field) {
-    if (wire == kFixed64) {
-      const uint64_t bits = fixed64();
-      double d;
-      std::memcpy(&d, &bits, 8);
-      out.push_back(d);
-    } else if (wire == kLengthDelimited) {
-      std::string_view v = bytes_field();
-      if (v.size() % 8) corrupt(fmt::format("packed '{}' of {} bytes", field, v.size()));
-      const size_t n0 = out.size();
-      out.resize(n0 + v.size() / 8);
-      if (!v.empty()) std::memcpy(out.data() + n0, v.data(), v.size());  // no null memcpy
-    } else {
-      corrupt(fmt::format("field '{}' has wire type {}", field, wire));
-    }
-  }
-
- private:
-  std::string_view bytes_;
-  size_t pos_ = 0;
-  size_t base_;
-  const std::filesystem::path* file_;
-  std::string context_;
-};
+// ONNX files are decoded by libonnx's generated ModelProto (protobuf); this file maps the few
+// message types a weights converter needs into plain structs and checks what protobuf cannot:
+// shapes against data sizes, external data, an empty graph.
 
 bool is_float_type(int32_t t) {
   return t == static_cast<int32_t>(OnnxDataType::float32) ||
@@ -217,77 +71,28 @@ int64_t raw_integer(const char* p, int32_t t) {
   }
 }
 
-OnnxTensor read_tensor(WireReader r) {
+[[noreturn]] void corrupt(const std::filesystem::path& file, const std::string& what) {
+  fail(ErrorCategory::format, "{}: not a valid ONNX model: {}", file.string(), what);
+}
+
+OnnxTensor read_tensor(const onnx::TensorProto& p, const std::filesystem::path& file) {
   OnnxTensor t;
-  std::string_view raw;
-  bool has_raw = false, external = false;
-  std::string location;
-  std::vector<float> floats;
-  std::vector<double> doubles;
-  std::vector<int64_t> ints;
-  uint32_t field, wire;
-  while (r.key(field, wire)) {
-    switch (field) {
-      case 1:
-        r.ints_field(wire, t.dims, "dims");
-        break;
-      case 2:
-        t.data_type = static_cast<int32_t>(r.int_field(wire, "data_type"));
-        break;
-      case 4:
-        r.floats_field(wire, floats, "float_data");
-        break;
-      case 5:
-        r.ints_field(wire, ints, "int32_data");
-        break;
-      case 7:
-        r.ints_field(wire, ints, "int64_data");
-        break;
-      case 11:
-        r.ints_field(wire, ints, "uint64_data");
-        break;
-      case 8:
-        t.name = r.string_field(wire, "name");
-        break;
-      case 9:
-        r.expect(wire, kLengthDelimited, "raw_data");
-        raw = r.bytes_field();
-        has_raw = true;
-        break;
-      case 10:
-        r.doubles_field(wire, doubles, "double_data");
-        break;
-      case 13: {  // external_data: StringStringEntryProto {key = 1, value = 2}
-        WireReader e = r.message("external_data");
-        std::string k, v;
-        uint32_t f2, w2;
-        while (e.key(f2, w2)) {
-          if (f2 == 1)
-            k = e.string_field(w2, "key");
-          else if (f2 == 2)
-            v = e.string_field(w2, "value");
-          else
-            e.skip(w2);
-        }
-        if (k == "location") location = v;
-        external = true;
-        break;
-      }
-      case 14:
-        if (r.int_field(wire, "data_location") == 1) external = true;
-        break;
-      default:
-        r.skip(wire);
-    }
-  }
-  for (int64_t d : t.dims)
-    if (d < 0) r.corrupt(fmt::format("tensor '{}' has negative dimension {}", t.name, d));
-  if (external)
+  t.name = p.name();
+  t.data_type = p.data_type();
+  t.dims.assign(p.dims().begin(), p.dims().end());
+  const bool external = p.data_location() == onnx::TensorProto::EXTERNAL || p.external_data_size();
+  if (external) {
+    std::string location;
+    for (const auto& e : p.external_data())
+      if (e.key() == "location") location = e.value();
     fail(ErrorCategory::unsupported,
          "{}: tensor '{}' stores its data outside the .onnx file (external data{}), which cvd "
          "does not read; re-save it inline with Python: m = onnx.load(path); "
          "onnx.save_model(m, 'inline.onnx', save_as_external_data=False)",
-         r.file().string(), t.name, location.empty() ? "" : fmt::format(" in '{}'", location));
+         file.string(), t.name, location.empty() ? "" : fmt::format(" in '{}'", location));
+  }
+  for (int64_t d : t.dims)
+    if (d < 0) corrupt(file, fmt::format("tensor '{}' has negative dimension {}", t.name, d));
   // Bound the element count before using it (a corrupt shape must not overflow int64 or size an
   // allocation: found by tests/fuzz/fuzz_onnx). The product of the non-zero dimensions is bounded
   // too: with a zero dimension the count is 0, but the strides still multiply the others (found
@@ -295,15 +100,17 @@ OnnxTensor read_tensor(WireReader r) {
   int64_t n = 1, nonzero = 1;
   for (int64_t d : t.dims) {
     if (d != 0 && nonzero > std::numeric_limits<int64_t>::max() / 16 / d)
-      r.corrupt(fmt::format("tensor '{}' has an impossibly large shape [{}]", t.name,
-                            fmt::join(t.dims, ", ")));
+      corrupt(file, fmt::format("tensor '{}' has an impossibly large shape [{}]", t.name,
+                                fmt::join(t.dims, ", ")));
     if (d != 0) nonzero *= d;
     n *= d;
   }
   const auto count_error = [&](size_t got, const char* field) {
-    r.corrupt(fmt::format("tensor '{}' of shape [{}] holds {} values in {}", t.name,
-                          fmt::join(t.dims, ", "), got, field));
+    corrupt(file, fmt::format("tensor '{}' of shape [{}] holds {} values in {}", t.name,
+                              fmt::join(t.dims, ", "), got, field));
   };
+  const std::string& raw = p.raw_data();
+  const bool has_raw = p.has_raw_data();
   if (is_float_type(t.data_type)) {
     const bool f32 = t.data_type == static_cast<int32_t>(OnnxDataType::float32);
     const size_t esize = f32 ? 4 : 8;
@@ -311,9 +118,9 @@ OnnxTensor read_tensor(WireReader r) {
     if (has_raw) {
       if (raw.size() != static_cast<size_t>(n) * esize) count_error(raw.size() / esize, "raw_data");
     } else if (f32) {
-      if (floats.size() != static_cast<size_t>(n)) count_error(floats.size(), "float_data");
+      if (p.float_data_size() != n) count_error(p.float_data_size(), "float_data");
     } else {
-      if (doubles.size() != static_cast<size_t>(n)) count_error(doubles.size(), "double_data");
+      if (p.double_data_size() != n) count_error(p.double_data_size(), "double_data");
     }
     t.values = Tensor::empty(Shape(t.dims.begin(), t.dims.end()), f32 ? DType::f32 : DType::f64);
     void* dst = t.values.data_ptr();
@@ -322,9 +129,9 @@ OnnxTensor read_tensor(WireReader r) {
     } else if (has_raw) {
       std::memcpy(dst, raw.data(), raw.size());
     } else if (f32) {
-      std::memcpy(dst, floats.data(), floats.size() * 4);
+      std::memcpy(dst, p.float_data().data(), static_cast<size_t>(n) * 4);
     } else {
-      std::memcpy(dst, doubles.data(), doubles.size() * 8);
+      std::memcpy(dst, p.double_data().data(), static_cast<size_t>(n) * 8);
     }
   } else if (integer_type_size(t.data_type) > 0) {
     if (has_raw) {
@@ -333,6 +140,15 @@ OnnxTensor read_tensor(WireReader r) {
       t.ints.resize(n);
       for (int64_t i = 0; i < n; ++i) t.ints[i] = raw_integer(raw.data() + i * es, t.data_type);
     } else {
+      // Each integer type has its own repeated field (int32_data also holds the narrower ones).
+      std::vector<int64_t> ints;
+      const auto t64 = static_cast<OnnxDataType>(t.data_type);
+      if (t64 == OnnxDataType::int64)
+        ints.assign(p.int64_data().begin(), p.int64_data().end());
+      else if (t64 == OnnxDataType::uint64 || t64 == OnnxDataType::uint32)
+        ints.assign(p.uint64_data().begin(), p.uint64_data().end());
+      else
+        ints.assign(p.int32_data().begin(), p.int32_data().end());
       if (ints.size() != static_cast<size_t>(n)) count_error(ints.size(), "int data");
       t.ints = std::move(ints);
     }
@@ -340,126 +156,44 @@ OnnxTensor read_tensor(WireReader r) {
   return t;
 }
 
-OnnxAttribute read_attribute(WireReader r) {
+OnnxAttribute read_attribute(const onnx::AttributeProto& p, const std::filesystem::path& file) {
   OnnxAttribute a;
-  uint32_t field, wire;
-  while (r.key(field, wire)) {
-    switch (field) {
-      case 1:
-        a.name = r.string_field(wire, "name");
-        break;
-      case 20:
-        a.type = static_cast<OnnxAttributeType>(r.int_field(wire, "type"));
-        break;
-      case 2: {
-        r.expect(wire, kFixed32, "f");
-        const uint32_t bits = r.fixed32();
-        std::memcpy(&a.f, &bits, 4);
-        break;
-      }
-      case 3:
-        a.i = r.int_field(wire, "i");
-        break;
-      case 4:
-        a.s = r.string_field(wire, "s");
-        break;
-      case 5:
-        r.expect(wire, kLengthDelimited, "t");
-        a.t = std::make_shared<OnnxTensor>(read_tensor(r.message("t")));
-        break;
-      case 7:
-        r.floats_field(wire, a.floats, "floats");
-        break;
-      case 8:
-        r.ints_field(wire, a.ints, "ints");
-        break;
-      case 9:
-        a.strings.push_back(r.string_field(wire, "strings"));
-        break;
-      default:
-        r.skip(wire);  // subgraphs and the rest: the op is refused by the converter
-    }
-  }
+  a.name = p.name();
+  a.type = static_cast<OnnxAttributeType>(p.type());
+  a.f = p.f();
+  a.i = p.i();
+  a.s = p.s();
+  a.floats.assign(p.floats().begin(), p.floats().end());
+  a.ints.assign(p.ints().begin(), p.ints().end());
+  a.strings.assign(p.strings().begin(), p.strings().end());
+  if (p.has_t()) a.t = std::make_shared<OnnxTensor>(read_tensor(p.t(), file));
+  // Subgraphs and the rest are not read: such ops are refused by the converter.
   return a;
 }
 
-OnnxNode read_node(WireReader r) {
+OnnxNode read_node(const onnx::NodeProto& p, const std::filesystem::path& file, size_t index) {
   OnnxNode n;
-  uint32_t field, wire;
-  while (r.key(field, wire)) {
-    switch (field) {
-      case 1:
-        n.inputs.push_back(r.string_field(wire, "input"));
-        break;
-      case 2:
-        n.outputs.push_back(r.string_field(wire, "output"));
-        break;
-      case 3:
-        n.name = r.string_field(wire, "name");
-        break;
-      case 4:
-        n.op_type = r.string_field(wire, "op_type");
-        break;
-      case 7:
-        n.domain = r.string_field(wire, "domain");
-        break;
-      case 5:
-        r.expect(wire, kLengthDelimited, "attribute");
-        n.attributes.push_back(read_attribute(r.message("attribute")));
-        break;
-      default:
-        r.skip(wire);
-    }
-  }
-  if (n.op_type.empty()) r.corrupt("node without op_type");
+  n.name = p.name();
+  n.op_type = p.op_type();
+  n.domain = p.domain();
+  n.inputs.assign(p.input().begin(), p.input().end());
+  n.outputs.assign(p.output().begin(), p.output().end());
+  for (const auto& a : p.attribute()) n.attributes.push_back(read_attribute(a, file));
+  if (n.op_type.empty()) corrupt(file, fmt::format("graph.node[{}] has no op_type", index));
   if (n.domain == "ai.onnx") n.domain.clear();
   return n;
 }
 
-std::string value_info_name(WireReader r) {
-  std::string name;
-  uint32_t field, wire;
-  while (r.key(field, wire)) {
-    if (field == 1)
-      name = r.string_field(wire, "name");
-    else
-      r.skip(wire);
-  }
-  return name;
-}
-
-OnnxGraph read_graph(WireReader r) {
+OnnxGraph read_graph(const onnx::GraphProto& p, const std::filesystem::path& file) {
+  if (p.sparse_initializer_size())
+    fail(ErrorCategory::unsupported,
+         "{}: the graph has sparse initializers, which cvd does not read", file.string());
   OnnxGraph g;
-  uint32_t field, wire;
-  while (r.key(field, wire)) {
-    switch (field) {
-      case 1:
-        r.expect(wire, kLengthDelimited, "node");
-        g.nodes.push_back(read_node(r.message(fmt::format("node[{}]", g.nodes.size()))));
-        break;
-      case 2:
-        g.name = r.string_field(wire, "name");
-        break;
-      case 5:
-        r.expect(wire, kLengthDelimited, "initializer");
-        g.initializers.push_back(
-            read_tensor(r.message(fmt::format("initializer[{}]", g.initializers.size()))));
-        break;
-      case 15:
-        fail(ErrorCategory::unsupported,
-             "{}: the graph has sparse initializers, which cvd does not read", r.file().string());
-      case 11:
-        r.expect(wire, kLengthDelimited, "input");
-        g.inputs.push_back(value_info_name(r.message("input")));
-        break;
-      case 12:
-        r.expect(wire, kLengthDelimited, "output");
-        g.outputs.push_back(value_info_name(r.message("output")));
-        break;
-      default:
-        r.skip(wire);
-    }
-  }
+  g.name = p.name();
+  for (int i = 0; i < p.node_size(); ++i) g.nodes.push_back(read_node(p.node(i), file, i));
+  for (const auto& t : p.initializer()) g.initializers.push_back(read_tensor(t, file));
+  for (const auto& v : p.input()) g.inputs.push_back(v.name());
+  for (const auto& v : p.output()) g.outputs.push_back(v.name());
   g.reindex();
   return g;
 }
@@ -542,52 +276,24 @@ OnnxModel parse_onnx(std::string_view bytes, const std::filesystem::path& source
          "{}: not an ONNX model but a zip archive (a PyTorch .pt / .pth checkpoint?): export it "
          "to ONNX first (see the README, 'Converting published weights')",
          source.string());
-  WireReader r(bytes, 0, &m.path, source.filename().string());
-  bool has_graph = false;
-  uint32_t field, wire;
-  while (r.key(field, wire)) {
-    switch (field) {
-      case 1:
-        m.ir_version = r.int_field(wire, "ir_version");
-        break;
-      case 2:
-        m.producer_name = r.string_field(wire, "producer_name");
-        break;
-      case 3:
-        m.producer_version = r.string_field(wire, "producer_version");
-        break;
-      case 7:
-        r.expect(wire, kLengthDelimited, "graph");
-        m.graph = read_graph(r.message("graph"));
-        has_graph = true;
-        break;
-      case 8: {
-        r.expect(wire, kLengthDelimited, "opset_import");
-        WireReader o = r.message("opset_import");
-        std::string domain;
-        int64_t version = 0;
-        uint32_t f2, w2;
-        while (o.key(f2, w2)) {
-          if (f2 == 1)
-            domain = o.string_field(w2, "domain");
-          else if (f2 == 2)
-            version = o.int_field(w2, "version");
-          else
-            o.skip(w2);
-        }
-        m.opset_imports.emplace_back(domain, version);
-        break;
-      }
-      default:
-        r.skip(wire);
-    }
-  }
-  if (!has_graph || m.ir_version <= 0)
-    fail(ErrorCategory::format, "{}: not a valid ONNX model: {}", source.string(),
-         has_graph ? "no ir_version" : "no graph (is this an ONNX file?)");
-  if (m.graph.nodes.empty())
-    fail(ErrorCategory::format, "{}: not a valid ONNX model: the graph has no nodes",
-         source.string());
+  if (bytes.size() > static_cast<size_t>(INT_MAX))
+    fail(ErrorCategory::unsupported,
+         "{}: {} bytes; protobuf decodes at most 2 GiB in one message and cvd does not read "
+         "external data",
+         source.string(), bytes.size());
+  onnx::ModelProto p;
+  if (!p.ParseFromArray(bytes.data(), static_cast<int>(bytes.size())))
+    corrupt(source,
+            "protobuf cannot decode it as an ONNX ModelProto (the file is truncated or "
+            "corrupt, or not an ONNX file)");
+  if (!p.has_graph()) corrupt(source, "no graph (is this an ONNX file?)");
+  if (p.ir_version() <= 0) corrupt(source, "no ir_version");
+  m.ir_version = p.ir_version();
+  m.producer_name = p.producer_name();
+  m.producer_version = p.producer_version();
+  for (const auto& o : p.opset_import()) m.opset_imports.emplace_back(o.domain(), o.version());
+  m.graph = read_graph(p.graph(), source);
+  if (m.graph.nodes.empty()) corrupt(source, "the graph has no nodes");
   return m;
 }
 

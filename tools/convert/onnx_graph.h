@@ -1,15 +1,15 @@
 // An ONNX model file (ModelProto) read into plain structs: the graph's nodes (op type, domain,
 // inputs, outputs, attributes), initializers, inputs / outputs and the opset imports.
 //
-// The file is decoded by a protobuf wire-format reader of our own (the few message types of
-// onnx.proto that a weights converter needs), so the library does not link protobuf / libonnx.
-// Fields it does not need (doc strings, value_info, metadata, training info) are skipped.
+// The file is decoded by libonnx's generated ModelProto (protobuf; only this converter layer,
+// not libcvd, links them) and the message types a weights converter needs are copied out; fields
+// it does not need (doc strings, value_info, metadata, training info) are ignored.
 //
 // Tensors: FLOAT and DOUBLE data (raw_data, float_data or double_data) become CPU f32 / f64
 // Tensors; integer and bool data (shape plumbing) become int64 values. Other element types
 // (FLOAT16, BFLOAT16, STRING, ...) are kept without data; a converter that needs one reports it.
 // External data (data_location EXTERNAL) is refused with a message that says how to re-save.
-// Every malformed file is an Error(format) naming the file, the byte offset and the field.
+// Every malformed file is an Error(format) naming the file and what is wrong.
 #pragma once
 #include <cstdint>
 #include <filesystem>

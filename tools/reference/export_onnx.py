@@ -13,6 +13,10 @@ ONNX for tests/test_convert.cpp, with the outputs PyTorch computes for the same 
   tests/data/onnx/unsupported_ops.onnx   a graph with two FancyOp (custom domain), one LSTM and
                                          a Conv, for the refusal test
   tests/data/onnx/external_data.onnx     a Conv whose weight is external data (refused)
+  tests/data/onnx/bad_tensors/*.onnx     well-formed protobuf whose one tensor is impossible
+                                         (shapes that overflow, data that does not fit the
+                                         shape; the fuzzer's findings as valid ModelProtos);
+                                         `--bad-tensors` writes only these
 
 The raw output is what DepthNet::forward_raw returns: MiDaS's network output on the ImageNet-
 normalised input (unsqueezed to [N, 1, H, W]), Mannequin's log-depth prediction on the input as is.
@@ -161,6 +165,39 @@ def external_data_model():
     return helper.make_model(graph, opset_imports=[helper.make_opsetid("", 14)])
 
 
+def bad_tensor_models():
+    """One model per impossible initializer: name -> ModelProto (each a Conv on that weight)."""
+    big = 1 << 40
+    cases = {
+        "impossibly_large_shape": TensorProto(name="w", data_type=TensorProto.FLOAT,
+                                              dims=[big, big, big]),
+        "zero_dim_with_huge_strides": TensorProto(name="w", data_type=TensorProto.FLOAT,
+                                                  dims=[0, 1 << 62, 1 << 62]),
+        "negative_dimension": TensorProto(name="w", data_type=TensorProto.FLOAT, dims=[-1, 2]),
+        "float_data_shorter_than_shape": TensorProto(name="w", data_type=TensorProto.FLOAT,
+                                                     dims=[1, 1, 1, 3], float_data=[1.0]),
+        "raw_data_shorter_than_shape": TensorProto(name="w", data_type=TensorProto.FLOAT,
+                                                   dims=[1, 1, 1, 3], raw_data=b"\0" * 10),
+        "int64_raw_data_of_odd_length": TensorProto(name="w", data_type=TensorProto.INT64,
+                                                    dims=[2], raw_data=b"\0" * 15),
+    }
+    models = {}
+    for name, w in cases.items():
+        x = helper.make_tensor_value_info("x", TensorProto.FLOAT, [1, 1, 2, 2])
+        y = helper.make_tensor_value_info("y", TensorProto.FLOAT, None)
+        graph = helper.make_graph([helper.make_node("Conv", ["x", "w"], ["y"])], name, [x], [y],
+                                  [w])
+        models[name] = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 14)])
+    return models
+
+
+def write_bad_tensor_models():
+    (OUT / "bad_tensors").mkdir(parents=True, exist_ok=True)
+    for name, m in bad_tensor_models().items():
+        with open(OUT / "bad_tensors" / f"{name}.onnx", "wb") as f:
+            f.write(m.SerializeToString())
+
+
 CONSTRUCTORS = {
     "midas_v2": midas_models.MidasV2,
     "midas_small": midas_models.MidasSmall,
@@ -199,6 +236,9 @@ def main():
         export_checkpoint(a.arch, a.checkpoint, a.output, *a.size)
         return
     OUT.mkdir(parents=True, exist_ok=True)
+    if sys.argv[1:] == ["--bad-tensors"]:
+        write_bad_tensor_models()
+        return
     only = sys.argv[1:]
     for arch, (make, width, seed, h, w) in NETS.items():
         if only and arch not in only:
@@ -234,6 +274,7 @@ def main():
         onnx.save(unsupported_model(), str(OUT / "unsupported_ops.onnx"))
         with open(OUT / "external_data.onnx", "wb") as f:
             f.write(external_data_model().SerializeToString())
+        write_bad_tensor_models()
 
 
 if __name__ == "__main__":

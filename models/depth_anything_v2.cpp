@@ -9,6 +9,7 @@ DepthAnythingConfig DepthAnythingConfig::vits() { return {}; }
 
 DepthAnythingConfig DepthAnythingConfig::vitb() {
   DepthAnythingConfig c;
+  c.arch = "depth_anything_v2_vitb";
   c.vit.embed_dim = 768;
   c.vit.heads = 12;
   c.features = 128;
@@ -18,6 +19,7 @@ DepthAnythingConfig DepthAnythingConfig::vitb() {
 
 DepthAnythingConfig DepthAnythingConfig::vitl() {
   DepthAnythingConfig c;
+  c.arch = "depth_anything_v2_vitl";
   c.vit.embed_dim = 1024;
   c.vit.depth = 24;
   c.vit.heads = 16;
@@ -27,14 +29,13 @@ DepthAnythingConfig DepthAnythingConfig::vitl() {
   return c;
 }
 
-DepthAnythingConfig DepthAnythingConfig::vits_scaled(double width) {
-  const MidasWidth w(width, "depth_anything_v2");
-  DepthAnythingConfig c;
-  c.vit.embed_dim = w(384);
+DepthAnythingConfig DepthAnythingConfig::scaled(DepthAnythingConfig c, double width) {
+  const MidasWidth w(width, c.arch.c_str());
+  c.vit.embed_dim = w(c.vit.embed_dim);
   CVD_CHECK(c.vit.embed_dim % c.vit.heads == 0,
-            "depth_anything_v2: width {} leaves {} channels, not a multiple of {} heads", width,
+            "{}: width {} leaves {} channels, not a multiple of {} heads", c.arch, width,
             c.vit.embed_dim, c.vit.heads);
-  c.features = w(64);
+  c.features = w(c.features);
   for (int64_t& o : c.out_channels) o = w(o);
   return c;
 }
@@ -50,17 +51,14 @@ struct DepthAnythingV2Net::Parts {
   std::shared_ptr<Conv2d> output_layer;
 };
 
-DepthAnythingV2Net::DepthAnythingV2Net(double width, Generator& gen)
-    : DepthAnythingV2Net(DepthAnythingConfig::vits_scaled(width), gen) {}
-
 DepthAnythingV2Net::DepthAnythingV2Net(const DepthAnythingConfig& config, Generator& gen)
     : config_(config), parts_(std::make_unique<Parts>()) {
   Parts& p = *parts_;
   const int64_t c = config.vit.embed_dim, f = config.features;
   const auto& oc = config.out_channels;
   for (int l : config.layers)
-    CVD_CHECK(l >= 0 && l < config.vit.depth, "depth_anything_v2: layer {} of a {}-block encoder",
-              l, config.vit.depth);
+    CVD_CHECK(l >= 0 && l < config.vit.depth, "{}: layer {} of a {}-block encoder", config.arch, l,
+              config.vit.depth);
   p.encoder = register_module("pretrained", std::make_shared<VitEncoder>(config.vit, gen));
   auto head = register_module("depth_head", std::make_shared<ModuleGroup>());
   auto projects = head->add("projects", std::make_shared<ModuleGroup>());
@@ -105,8 +103,8 @@ Tensor DepthAnythingV2Net::normalize_input(const Tensor& rgb01) const {
 Tensor DepthAnythingV2Net::forward_raw(const Tensor& x) {
   const int patch = config_.vit.patch;
   CVD_CHECK(x.dim() == 4 && x.size(1) == 3 && x.size(2) % patch == 0 && x.size(3) % patch == 0,
-            "depth_anything_v2: input {} must be [N, 3, H, W] with H and W multiples of {}",
-            x.str(), patch);
+            "{}: input {} must be [N, 3, H, W] with H and W multiples of {}", config_.arch, x.str(),
+            patch);
   Parts& p = *parts_;
   const int64_t n = x.size(0), ph = x.size(2) / patch, pw = x.size(3) / patch;
   const std::vector<int> layers(config_.layers.begin(), config_.layers.end());

@@ -15,6 +15,7 @@
 // side); normalize_input applies the ImageNet mean / std.
 #pragma once
 #include <array>
+#include <string>
 
 #include "models/depth_net.h"
 #include "models/vit_encoder.h"
@@ -22,26 +23,28 @@
 namespace cvd {
 
 struct DepthAnythingConfig {
+  // The architecture-table row this configuration is (models/depth_net_architectures.cpp): the
+  // name `arch()` reports and .cvdw files carry.
+  std::string arch = "depth_anything_v2";
   VitConfig vit;
   int64_t features = 64;
   std::array<int64_t, 4> out_channels{48, 96, 192, 384};
   std::array<int, 4> layers{2, 5, 8, 11};  // blocks whose tokens the head reads
 
-  static DepthAnythingConfig vits();  // 24.8 M parameters (Apache-2.0 checkpoint)
-  static DepthAnythingConfig vitb();
-  static DepthAnythingConfig vitl();
-  // ViT-S with every width (embedding, head, features, out_channels) times `width`, a power of two
-  // in (0, 1]; the embedding stays a multiple of the 6 heads. 1 = vits().
-  static DepthAnythingConfig vits_scaled(double width);
+  static DepthAnythingConfig vits();  // "depth_anything_v2": 24.8 M parameters (Apache-2.0)
+  static DepthAnythingConfig vitb();  // "depth_anything_v2_vitb": 97.5 M
+  static DepthAnythingConfig vitl();  // "depth_anything_v2_vitl": 335.3 M
+  // `base` with every width (embedding, features, out_channels) times `width`, a power of two in
+  // (0, 1]; the embedding stays a multiple of the base's heads. width 1 = base.
+  static DepthAnythingConfig scaled(DepthAnythingConfig base, double width);
+  static DepthAnythingConfig vits_scaled(double width) { return scaled(vits(), width); }
 };
 
 class DepthAnythingV2Net : public DepthNet {
  public:
   DepthAnythingV2Net(const DepthAnythingConfig& config, Generator& gen);
-  // vits_scaled(width): the architecture table's factory.
-  DepthAnythingV2Net(double width, Generator& gen);
   ~DepthAnythingV2Net() override;
-  std::string arch() const override { return "depth_anything_v2"; }
+  std::string arch() const override { return config_.arch; }
   int alignment() const override { return config_.vit.patch; }
   DepthOutputKind output_kind() const override { return DepthOutputKind::inverse_depth; }
   Tensor normalize_input(const Tensor& rgb01) const override;

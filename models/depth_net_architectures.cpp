@@ -17,6 +17,11 @@ std::unique_ptr<DepthNet> make(double width, Generator& gen) {
   return std::make_unique<Net>(width, gen);
 }
 
+template <DepthAnythingConfig (*Base)()>
+std::unique_ptr<DepthNet> make_depth_anything(double width, Generator& gen) {
+  return std::make_unique<DepthAnythingV2Net>(DepthAnythingConfig::scaled(Base(), width), gen);
+}
+
 }  // namespace
 
 const std::vector<DepthNetArchitecture>& depth_net_architectures() {
@@ -30,8 +35,17 @@ const std::vector<DepthNetArchitecture>& depth_net_architectures() {
       {"midas_small", &make<MidasSmallNet>, DepthOutputKind::inverse_depth, 32, 1e-4, 1e-4,
        "MiDaS v2.1 small, EfficientNet-Lite3 encoder (inverse depth)"},
       // Provisional: MiDaS's values until measured (issue 22, item 5).
-      {"depth_anything_v2", &make<DepthAnythingV2Net>, DepthOutputKind::inverse_depth, 14, 1e-4,
-       1e-4, "Depth Anything V2 ViT-S, DINOv2 encoder + DPT head (affine-invariant inverse depth)",
+      {"depth_anything_v2", &make_depth_anything<&DepthAnythingConfig::vits>,
+       DepthOutputKind::inverse_depth, 14, 1e-4, 1e-4,
+       "Depth Anything V2 ViT-S, DINOv2 encoder + DPT head (affine-invariant inverse depth)",
+       /*affine_disparity=*/true},
+      {"depth_anything_v2_vitb", &make_depth_anything<&DepthAnythingConfig::vitb>,
+       DepthOutputKind::inverse_depth, 14, 1e-4, 1e-4,
+       "Depth Anything V2 ViT-B (97.5 M parameters)",
+       /*affine_disparity=*/true},
+      {"depth_anything_v2_vitl", &make_depth_anything<&DepthAnythingConfig::vitl>,
+       DepthOutputKind::inverse_depth, 14, 1e-4, 1e-4,
+       "Depth Anything V2 ViT-L (335.3 M parameters)",
        /*affine_disparity=*/true},
   };
   return table;

@@ -141,19 +141,22 @@ TEST(DepthAnythingV2, SquareInputUsesThePositionEmbeddingAsIs) {
   EXPECT_LE(max_abs_diff(out, ref), 1e-9 * (*hi - *lo));
 }
 
-TEST(DepthAnythingV2, FullSizeViTSMatchesTheReferenceState) {
-  std::ifstream in(test::source_dir() / "tests/data/models/depth_anything_v2_vits_state.json");
-  ASSERT_TRUE(in) << "tests/data/models/depth_anything_v2_vits_state.json";
-  const nlohmann::json ref = nlohmann::json::parse(in);
-  Generator gen(0);
-  DepthAnythingV2Net net(DepthAnythingConfig::vits(), gen);
-  EXPECT_EQ(net.parameter_count(), ref.at("parameters").get<int64_t>());
-  const NamedTensors state = net.named_state();
-  ASSERT_EQ(state.size(), ref.at("state").size());
-  for (size_t i = 0; i < state.size(); ++i) {
-    EXPECT_EQ(state[i].first, ref["state"][i][0].get<std::string>()) << i;
-    EXPECT_EQ(state[i].second.shape(), ref["state"][i][1].get<Shape>()) << state[i].first;
-  }
+TEST(DepthAnythingV2, LargerEncodersScaleByWidth) {
+  // Half width keeps the heads (64 -> 32 channels each) and halves every channel count.
+  Generator gen(2);
+  const auto half = create_depth_net("depth_anything_v2_vitb", 0.5, gen);
+  const auto& cfg = dynamic_cast<const DepthAnythingV2Net&>(*half).config();
+  EXPECT_EQ(cfg.vit.embed_dim, 384);
+  EXPECT_EQ(cfg.vit.heads, 12);
+  EXPECT_EQ(cfg.features, 64);
+  EXPECT_EQ(cfg.out_channels, (std::array<int64_t, 4>{48, 96, 192, 384}));
+  EXPECT_EQ(half->arch(), "depth_anything_v2_vitb");
+  const auto& large = dynamic_cast<const DepthAnythingV2Net&>(
+      *create_depth_net("depth_anything_v2_vitl", 1.0 / 16, gen));
+  EXPECT_EQ(large.config().vit.depth, 24);
+  EXPECT_EQ(large.config().layers, (std::array<int, 4>{4, 11, 17, 23}));
+  // ViT-L's 16 heads need 16 channels or more: width 1/128 leaves 8.
+  EXPECT_THROW(create_depth_net("depth_anything_v2_vitl", 1.0 / 128, gen), Error);
 }
 
 TEST(DepthAnythingV2, TableRowAndInputChecks) {

@@ -15,8 +15,9 @@ inline namespace v1 {
 
 /// How to build or load a depth network and at what resolution to run it.
 struct DepthModelOptions {
-  /// Architecture: "mannequin", "midas_small", "midas_v2" or "depth_anything_v2". For load(), empty = the one named in
-  /// the .cvdw header; a non-empty value must match it.
+  /// Architecture: "mannequin", "midas_small", "midas_v2" or "depth_anything_v2" (ViT-S;
+  /// "depth_anything_v2_vitb" / "_vitl" for the larger encoders). For load(), empty = the one
+  /// named in the .cvdw header; a non-empty value must match it.
   std::string arch = "mannequin";
   /// Width multiplier of create_default()'s network (load() reads it from the file header).
   double width = 0.25;

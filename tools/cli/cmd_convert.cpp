@@ -1,7 +1,8 @@
-// `cvd convert MODEL.onnx --arch midas_v2|midas_small|mannequin|flownet2 [--width W] -o
+// `cvd convert MODEL.onnx --arch ARCH (a depth network's or flownet2) [--width W] -o
 // MODEL.cvdw`: converts the weights of an ONNX export of a depth network or of FlowNet2 (custom
 // ops in domain cvd.flownet2, tools/convert/onnx_flownet2.h) into cvd's weights file.
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include <filesystem>
 #include <string>
@@ -70,7 +71,7 @@ const CommandRegistration registration(60, [](CLI::App& app) {
   sub->add_option("MODEL", args->onnx, "ONNX file (BatchNorm unfolded: see the README)")
       ->required();
   sub->add_option("--arch", args->arch,
-                  "Architecture: midas_v2, midas_small, mannequin or flownet2")
+                  fmt::format("Architecture: {}", fmt::join(convert_archs(), ", ")))
       ->required()
       ->check(CLI::IsMember(convert_archs()));
   sub->add_option("--width", args->width, "Channel width multiplier of the network (1 = published)")

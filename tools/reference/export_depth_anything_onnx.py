@@ -12,7 +12,10 @@ tests/test_convert_depth_anything.cpp:
 A published checkpoint (depth_anything_v2_vits.pth, Apache-2.0), for the README's recipe:
   OMP_NUM_THREADS=2 /usr/bin/python3 tools/reference/export_depth_anything_onnx.py \\
       --checkpoint depth_anything_v2_vits.pth [--encoder vits|vitb|vitl] -o da2.onnx
-then  cvd convert da2.onnx --arch depth_anything_v2 -o da2.cvdw
+then  cvd convert da2.onnx --arch depth_anything_v2[_vitb|_vitl] -o da2.cvdw
+(--random-seed N instead of --checkpoint exports seeded random weights of the full-size network;
+--expected FILE.cvdw adds the example input and PyTorch's output on it: the optional full-size
+parity test, tests/test_depth_anything_full_size.cpp, uses both.)
 """
 import argparse
 import copy
@@ -27,7 +30,7 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import depth_anything_v2_model as dav2  # noqa: E402
 from cvdw_writer import write_cvdw  # noqa: E402
 from export_onnx import compact  # noqa: E402
-from gen_depth_anything_fixture import REDUCED  # noqa: E402
+from gen_depth_anything_fixture import REDUCED, randomize_norms_and_gammas_  # noqa: E402
 
 OUT = pathlib.Path(__file__).resolve().parents[2] / "tests" / "data" / "onnx"
 ENCODERS = {"vits": dav2.VITS, "vitb": dav2.VITB, "vitl": dav2.VITL}
@@ -75,19 +78,44 @@ def main():
         tiny()
         return
     ap = argparse.ArgumentParser(description="Export a Depth Anything V2 checkpoint for cvd convert")
-    ap.add_argument("--checkpoint", required=True, help="depth_anything_v2_<encoder>.pth")
+    src = ap.add_mutually_exclusive_group(required=True)
+    src.add_argument("--checkpoint", help="depth_anything_v2_<encoder>.pth")
+    src.add_argument("--random-seed", type=int,
+                     help="no checkpoint: seeded random weights (to check a full-size conversion)")
     ap.add_argument("--encoder", default="vits", choices=sorted(ENCODERS))
     ap.add_argument("-o", "--output", required=True)
+    ap.add_argument("--expected", help="also write the example input and PyTorch's float64 output "
+                                       "on it (a .cvdw: input, output) for a parity check")
     ap.add_argument("--size", type=int, nargs=2, default=[518, 518], metavar=("H", "W"),
                     help="example input size (keep 518 x 518: other sizes resize the position "
                          "embedding bicubically, which torch 1.13 cannot export)")
     a = ap.parse_args()
+    if a.random_seed is not None:
+        torch.manual_seed(a.random_seed)
     model = dav2.DepthAnythingV2(ENCODERS[a.encoder])
-    state = torch.load(a.checkpoint, map_location="cpu")
-    model.load_state_dict(state)  # strict: every name and shape of the published network
-    onnx.save(export(model, torch.rand(1, 3, *a.size)), a.output)
-    print(f"wrote {a.output}: convert with  cvd convert {a.output} --arch depth_anything_v2 "
-          f"-o depth_anything_v2.cvdw")
+    if a.random_seed is not None:
+        # Default initialisation makes every LayerScale gamma and LayerNorm weight / bias equal,
+        # and the exporter then keeps one initializer for all of them (names lost): randomise
+        # them as the fixtures do, so that the export looks like a trained checkpoint's.
+        gen = torch.Generator().manual_seed(a.random_seed)
+        randomize_norms_and_gammas_(model, gen)
+        with torch.no_grad():  # so that the final ReLUs pass most pixels
+            model.depth_head.scratch.output_conv2[2].bias.fill_(0.5)
+    if a.checkpoint:
+        state = torch.load(a.checkpoint, map_location="cpu")
+        model.load_state_dict(state)  # strict: every name and shape of the published network
+    x = torch.rand(1, 3, *a.size)
+    onnx.save(export(model, x), a.output)
+    if a.expected:
+        with torch.no_grad():
+            out = copy.deepcopy(model).double().eval()(x.double())
+        write_cvdw(a.expected, "depth_anything_v2",
+                   {"encoder": a.encoder, "generator": "tools/reference/export_depth_anything_onnx.py",
+                    "torch": torch.__version__},
+                   [("input", x, ""), ("output", out, "")])
+    arch = "depth_anything_v2" + ("" if a.encoder == "vits" else "_" + a.encoder)
+    print(f"wrote {a.output}: convert with  cvd convert {a.output} --arch {arch} "
+          f"-o {arch}.cvdw")
 
 
 if __name__ == "__main__":

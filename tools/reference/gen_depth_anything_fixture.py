@@ -15,8 +15,9 @@ Names:
   square/input, square/output   the 56 x 56 case (forward only)
 Header config: "dav2_config" (the reduced configuration) and "pytorch_f32_error" (PyTorch's own
 float32 error per reference tensor, metrics as tests/test_models.cpp). Also writes
-tests/data/models/depth_anything_v2_vits_state.json: the name and shape of every tensor of the
-ViT-S network, in order, and its parameter count.
+tests/data/models/depth_anything_v2_{vits,vitb,vitl}_state.json: the name and shape of every
+tensor of the three published networks, in order, and their parameter counts (`--states-only`
+writes only these).
 Run offline: OMP_NUM_THREADS=2 /usr/bin/python3 tools/reference/gen_depth_anything_fixture.py
 """
 import copy
@@ -38,6 +39,20 @@ REDUCED = dict(embed_dim=12, depth=4, heads=2, mlp_ratio=2, patch=14, pos_grid=4
 SEED = 21
 
 
+def randomize_norms_and_gammas_(model, gen):
+    """Random (not unit) LayerScale and LayerNorm affine parameters and class token, so that every
+    term matters (and no two initializers of an ONNX export are equal)."""
+    with torch.no_grad():
+        for name, p in model.named_parameters():
+            if name.endswith("ls1.gamma") or name.endswith("ls2.gamma"):
+                p.copy_(0.5 + torch.rand(p.shape, generator=gen))
+            elif "norm" in name and name.endswith("weight"):
+                p.copy_(1 + 0.2 * torch.randn(p.shape, generator=gen))
+            elif "norm" in name and name.endswith("bias"):
+                p.copy_(0.2 * torch.randn(p.shape, generator=gen))
+        model.pretrained.cls_token.copy_(torch.randn(model.pretrained.cls_token.shape, generator=gen))
+
+
 def run(model, rgb, R, dtype):
     m = copy.deepcopy(model).to(dtype)
     out = m(imagenet_normalize(rgb.to(dtype)))
@@ -50,22 +65,29 @@ def run(model, rgb, R, dtype):
     return res, out
 
 
+def write_published_states():
+    """The published configurations' parameter counts and state names / shapes (no weights)."""
+    for encoder, config in (("vits", dav2.VITS), ("vitb", dav2.VITB), ("vitl", dav2.VITL)):
+        full = dav2.DepthAnythingV2(config)
+        shapes = {"parameters": sum(p.numel() for p in full.parameters()),
+                  "state": [[n, list(t.shape)] for n, t in full.state_dict().items()]}
+        del full
+        state_path = OUT / f"depth_anything_v2_{encoder}_state.json"
+        state_path.write_text(json.dumps(shapes, indent=0) + "\n")
+        print(f"{state_path}: {shapes['parameters']} parameters, {len(shapes['state'])} tensors")
+
+
 def main():
     OUT.mkdir(parents=True, exist_ok=True)
+    if "--states-only" in sys.argv:
+        write_published_states()
+        return
     torch.manual_seed(SEED)
     gen = torch.Generator().manual_seed(SEED)
     model = dav2.DepthAnythingV2(REDUCED)
+    randomize_norms_and_gammas_(model, gen)
     with torch.no_grad():
-        # Random (not unit) LayerScale and LayerNorm affine parameters, so every term matters;
-        # a raised output bias so that the final ReLUs pass most pixels.
-        for name, p in model.named_parameters():
-            if name.endswith("ls1.gamma") or name.endswith("ls2.gamma"):
-                p.copy_(0.5 + torch.rand(p.shape, generator=gen))
-            elif "norm" in name and name.endswith("weight"):
-                p.copy_(1 + 0.2 * torch.randn(p.shape, generator=gen))
-            elif "norm" in name and name.endswith("bias"):
-                p.copy_(0.2 * torch.randn(p.shape, generator=gen))
-        model.pretrained.cls_token.copy_(torch.randn(model.pretrained.cls_token.shape, generator=gen))
+        # A raised output bias so that the final ReLUs pass most pixels.
         model.depth_head.scratch.output_conv2[2].bias.fill_(0.5)
     rgb = torch.rand(2, 3, 56, 42, generator=gen)
     R = torch.randn(2, 1, 56, 42, generator=gen)
@@ -88,12 +110,7 @@ def main():
     print(f"{path}: {sum(p.numel() for p in model.parameters())} parameters, "
           f"{path.stat().st_size} bytes")
 
-    full = dav2.DepthAnythingV2(dav2.VITS)
-    shapes = {"parameters": sum(p.numel() for p in full.parameters()),
-              "state": [[n, list(t.shape)] for n, t in full.state_dict().items()]}
-    state_path = OUT / "depth_anything_v2_vits_state.json"
-    state_path.write_text(json.dumps(shapes, indent=0) + "\n")
-    print(f"{state_path}: {shapes['parameters']} parameters, {len(shapes['state'])} tensors")
+    write_published_states()
 
 
 if __name__ == "__main__":

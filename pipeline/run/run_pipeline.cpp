@@ -3,7 +3,6 @@
 #include <spdlog/spdlog.h>
 #include <sys/resource.h>
 
-#include <zlib.h>
 #include <algorithm>
 #include <chrono>
 #include <memory>
@@ -22,32 +21,23 @@
 #include "models/depth_net_architectures.h"
 #include "pipeline/eval/eval_sparse.h"
 #include "pipeline/flow/user_masks.h"
-#include "pipeline/geometry/disparity_affine.h"
-#include "pipeline/geometry/flow_tracks.h"
-#include "pipeline/geometry/flow_triangulation.h"
-#include "pipeline/geometry/scale_calibration.h"
 #include "pipeline/io/atomic_file.h"
 #include "pipeline/io/frame_source.h"
 #include "pipeline/io/output_lock.h"
 #include "pipeline/io/pfm_io.h"
 #include "pipeline/poses/keyframe_selection.h"
+#include "pipeline/run/depth_inference.h"
 #include "pipeline/run/flow_pair_source.h"
+#include "pipeline/run/initial_depth_stage.h"
 #include "pipeline/run/run_outputs.h"
 #include "pipeline/run/run_stages.h"
-#include "pipeline/training/network_start.h"
-#include "pipeline/training/test_time_training.h"
+#include "pipeline/run/sparse_point_stage.h"
+#include "pipeline/run/training_stage.h"
 
 namespace cvd {
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;
-
-double default_learning_rate(const std::string& arch) {
-  return depth_net_architecture(arch).default_lr;
-}
-double default_lambda(const std::string& arch) {
-  return depth_net_architecture(arch).default_lambda;
-}
 
 namespace {
 
@@ -83,44 +73,6 @@ std::unique_ptr<DepthNet> load_network(const RunOptions& o, std::string& descrip
   return net;
 }
 
-SparseDepth project_points(const FrameCamera& c, const std::vector<Eigen::Vector3d>& pts) {
-  SparseDepth s;
-  const Intrinsics& K = c.intrinsics;
-  for (const auto& X : pts) {
-    Eigen::Vector3d p = c.pose.R.transpose() * (X - c.pose.t);
-    if (p.z() <= 0) continue;
-    double u = K.fx * p.x() / p.z() + K.cx, v = K.fy * p.y() / p.z() + K.cy;
-    if (u < 0 || v < 0 || u > K.width - 1 || v > K.height - 1) continue;
-    s.u.push_back(u);
-    s.v.push_back(v);
-    s.z.push_back(p.z());
-  }
-  return s;
-}
-
-// Depth of every frame (eval mode). Several processes: frame k on rank k % R, then each map
-// broadcast from its rank, so every process holds all of them.
-std::vector<cv::Mat> infer_depths(DepthNet& net, const std::function<Tensor(int)>& load_frame,
-                                  int n, cv::Size size, const RunOptions& o,
-                                  const std::string& stage) {
-  NoGradGuard ng;
-  net.eval();
-  ProcessGroup& pg = process_group();
-  std::vector<cv::Mat> r(static_cast<size_t>(n));
-  for (int k = pg.rank(); k < n; k += pg.size()) {
-    r[size_t(k)] = depth_to_mat(net.depth(load_frame(k).unsqueeze(0)).squeeze(0).squeeze(0));
-    if (o.progress) o.progress({stage, k + 1, n, ""});
-  }
-  if (pg.size() > 1)
-    for (int k = 0; k < n; ++k) {
-      if (r[size_t(k)].empty()) r[size_t(k)] = cv::Mat(size, CV_32F);
-      CVD_CHECK(r[size_t(k)].isContinuous() && r[size_t(k)].type() == CV_32F,
-                "infer_depths: unexpected depth map layout");
-      pg.broadcast(r[size_t(k)].data, r[size_t(k)].total() * sizeof(float), k % pg.size());
-    }
-  return r;
-}
-
 // Runs `stage` on rank 0 first, then (after it finished) on the other processes, which then
 // find its results in the cache. One process: just runs it.
 template <class F>
@@ -134,67 +86,6 @@ auto rank0_first(F&& stage) {
   }
   pg.barrier();
   return stage();
-}
-
-// Fingerprint of the cameras training sees (a rerun of COLMAP gives other poses).
-uint32_t cameras_crc32(const std::vector<FrameCamera>& cams) {
-  uLong crc = crc32(0L, Z_NULL, 0);
-  for (const auto& c : cams) {
-    double v[17] = {c.intrinsics.fx, c.intrinsics.fy, c.intrinsics.cx, c.intrinsics.cy,
-                    c.pose.t.x(),    c.pose.t.y(),    c.pose.t.z(),    c.registered ? 1.0 : 0.0};
-    for (int k = 0; k < 9; ++k) v[8 + k] = c.pose.R(k / 3, k % 3);
-    crc = crc32(crc, reinterpret_cast<const Bytef*>(v), sizeof v);
-  }
-  return static_cast<uint32_t>(crc);
-}
-
-}  // namespace
-
-namespace {
-
-// Converted affine-invariant disparity networks (Depth Anything V2): a robust scale-and-shift fit
-// of the raw output (1 / the initial depth, which used no affine) to the sparse points' inverse
-// depths, set on the network; the initial depth maps are mapped the same way. Poses keep units.
-json calibrate_disparity_affine(DepthNet& net, std::vector<cv::Mat>& initial,
-                                const std::vector<SparseDepth>& sparse) {
-  std::vector<double> raw, depth;
-  for (size_t k = 0; k < initial.size() && k < sparse.size(); ++k) {
-    const cv::Mat& d = initial[k];
-    for (size_t i = 0; i < sparse[k].z.size(); ++i) {
-      const int x = static_cast<int>(std::lround(sparse[k].u[i]));
-      const int y = static_cast<int>(std::lround(sparse[k].v[i]));
-      if (x < 0 || y < 0 || x >= d.cols || y >= d.rows) continue;
-      const float nd = d.at<float>(y, x);
-      // 1e4: the depth of a raw output at or below the 1e-4 floor (no signal there).
-      if (nd > 0 && nd < 1e4f) {
-        raw.push_back(1.0 / nd);
-        depth.push_back(sparse[k].z[i]);
-      }
-    }
-  }
-  const DisparityAffineFit fit = fit_disparity_affine(raw, depth);
-  net.set_disparity_affine(fit.scale, fit.shift, fit.floor);
-  for (cv::Mat& d : initial)
-    for (int y = 0; y < d.rows; ++y)
-      for (int x = 0; x < d.cols; ++x) {
-        float& v = d.at<float>(y, x);
-        const double r = v > 0 ? 1.0 / v : 0.0;
-        v = static_cast<float>(1.0 / std::max(fit.scale * r + fit.shift, fit.floor));
-      }
-  if (fit.scale_only)
-    spdlog::warn(
-        "disparity calibration: the scale-and-shift fit was degenerate ({} samples); "
-        "fitted the scale only",
-        fit.samples);
-  return {{"method",
-           "affine-invariant disparity: robust fit 1/z = scale * output + shift to the sparse "
-           "points (Huber IRLS); poses keep their units"},
-          {"scale", fit.scale},
-          {"shift", fit.shift},
-          {"samples", fit.samples},
-          {"inliers", fit.inliers},
-          {"residual_mad", fit.residual_mad},
-          {"scale_only", fit.scale_only}};
 }
 
 }  // namespace
@@ -300,174 +191,21 @@ RunResult run_pipeline(const RunOptions& o) {
   }
 
   // 5. Sparse points: SfM's, or triangulated from flow when poses came from the user.
-  std::vector<std::vector<Eigen::Vector3d>> points = poses.points;
-  bool have_sfm_points = false;
-  for (auto& p : points) have_sfm_points |= !p.empty();
-  json sparse_info;
-  if (!have_sfm_points) {
-    // Tracks through the consecutive-frame flows: one point per track, seen by every frame of it,
-    // so the frames' sparse depths share one scale. Pair-by-pair triangulation only when no
-    // track could be triangulated (e.g. a clip with consecutive pairs dropped).
-    const FlowPairSource masked(flow, cams, usable);
-    std::vector<cv::Mat> next_flow(static_cast<size_t>(n)), next_mask(static_cast<size_t>(n));
-    for (size_t k = 0; k < flow.pairs.size(); ++k)
-      if (flow.pairs[k].pair.second == flow.pairs[k].pair.first + 1) {
-        const FlowPairData p = masked.flows(k);  // consecutive pairs stay in memory
-        next_flow[size_t(p.pair.first)] = p.forward;
-        next_mask[size_t(p.pair.first)] = p.forward_mask;
-      }
-    const FlowTrackStats ts = triangulate_flow_tracks(cams, next_flow, next_mask, points);
-    sparse_info = {{"method", "flow tracks"}, {"tracks", ts.tracks}, {"kept", ts.kept}};
-    spdlog::info("sparse points: {} of {} flow tracks triangulated", ts.kept, ts.tracks);
-    if (ts.kept == 0) {
-      int kept = 0;
-      for (size_t k = 0; k < flow.pairs.size(); ++k) {
-        const FlowPairData p = masked.flows(k);
-        kept += triangulate_flow_points(cams[p.pair.first], cams[p.pair.second], p.pair.first,
-                                        p.pair.second, p.forward, p.forward_mask, points);
-      }
-      sparse_info = {{"method", "flow pairs (no track could be triangulated)"}, {"kept", kept}};
-      spdlog::warn("sparse points: no flow track could be triangulated; {} points from pairs",
-                   kept);
-    }
-  }
+  const SparsePointsStage points = run_sparse_points_stage(poses, flow, cams, usable);
 
   // 6. Initial depth, scale calibration / default-network initialisation
   t = Clock::now();
-  std::vector<SparseDepth> sparse(n);
-  for (int k = 0; k < n; ++k)
-    if (cams[k].registered) sparse[k] = project_points(cams[k], points[k]);
-  json calib;
-  if (o.model.empty()) {
-    NetworkStartOptions so;
-    so.warmup_steps = o.warmup_steps;
-    so.lr = o.lr > 0 ? o.lr : default_learning_rate(net->arch());
-    so.seed = o.seed;
-    // Flow-triangulated points are fitted up to one scale per frame (measured on 7-Scenes
-    // frames 0-39 with flow-track points: final AbsRel 0.147 this way, 0.169 with absolute log
-    // depth); SfM points in absolute log depth.
-    so.scale_free_per_frame = !have_sfm_points;
-    if (o.progress) {
-      so.progress = [&](int step, int steps, const std::string& detail) {
-        o.progress({"warm-up", step, steps, detail});
-      };
-    }
-    std::vector<std::string> start_warnings;
-    // Rank 0 warms the network up; the others receive its weights.
-    if (pg.rank() == 0) {
-      calib = start_default_network(*net, load_frame, sparse, so, &start_warnings);
-      if (!start_warnings.empty()) calib["warnings"] = start_warnings;
-    }
-    if (pg.size() > 1) {
-      pg.barrier();  // the others wait here (without spinning) while rank 0 warms up
-      broadcast_module(*net, 0);
-      calib = json::parse(broadcast_string(calib.dump(), 0));
-    }
-    calib["method"] =
-        "default network: a flat plane at the median sparse depth (zero output head), then a "
-        "warm-up on sparse depths kept as far as it beats the plane on held-out points; poses "
-        "keep their units";
-  }
-  std::vector<cv::Mat> initial = infer_depths(*net, load_frame, n, dsize, o, "initial depth");
-  if (!o.model.empty() && depth_net_architecture(net->arch()).affine_disparity) {
-    calib = calibrate_disparity_affine(*net, initial, sparse);
-  } else if (!o.model.empty()) {
-    ScaleCalibrationResult sc = calibrate_scale(cams, initial, points);
-    CVD_CHECK(sc.num_valid() > 0, "scale calibration: no frame has enough sparse points");
-    cams = sc.cameras;
-    calib = {{"method", "per-frame median ratio network/SfM depth, mean over frames"},
-             {"scale", sc.scale},
-             {"frame_scales", sc.frame_scales},
-             {"valid_frames", sc.num_valid()}};
-  }
+  InitialDepthStage initial = run_initial_depth_stage(o, *net, load_frame, points, cams, dsize);
   timings["initial_depth"] = since(t);
 
   // 7. Test-time training
-  // The pairs with the final cameras: streamed from the cache, or all loaded now.
-  const FlowPairSource pair_loader(flow, cams, usable);
-  std::unique_ptr<PairSource> in_memory;
-  if (!stream) {
-    std::vector<TrainingPair> all;
-    for (size_t k = 0; k < pair_loader.size(); ++k) all.push_back(pair_loader.load(k));
-    in_memory = std::make_unique<PairsInMemory>(std::move(all));
-  }
-  const PairSource& pairs = stream ? static_cast<const PairSource&>(pair_loader) : *in_memory;
-  TrainingOptions to;
-  to.epochs = o.epochs;
-  if (o.steps > 0 && o.epochs > 0) to.steps_per_epoch = (o.steps + o.epochs - 1) / o.epochs;
-  to.batch_pairs = o.batch_pairs;
-  to.lr = o.lr > 0 ? o.lr : default_learning_rate(net->arch());
-  to.lambda_disparity = o.lambda_disparity >= 0 ? o.lambda_disparity : default_lambda(net->arch());
-  to.seed = o.seed;
-  to.checkpoint_dir = cache / "training";
-  to.resume_key = json{{"model", o.model.string()},
-                       {"arch", net->arch()},
-                       {"width", o.width},
-                       {"depth_size", {dsize.width, dsize.height}},
-                       {"lr", to.lr},
-                       {"lambda", to.lambda_disparity},
-                       {"batch_pairs", to.batch_pairs},
-                       {"steps_per_epoch", to.steps_per_epoch},
-                       {"seed", to.seed},
-                       {"warmup_steps", o.warmup_steps},
-                       {"masks", o.masks.string()},
-                       {"poses", poses.source},
-                       {"flow", o.flow},
-                       {"precision", precision_name(precision)},
-                       {"pairs", pairs.size()},
-                       {"cameras_crc32", cameras_crc32(cams)},
-                       {"sparse_points", o.sparse_points},
-                       {"refine_poses", o.refine_poses},
-                       {"refine_focal", o.refine_focal}}
-                      .dump();
-  to.stop_after_epochs = o.stop_after_epochs;
-  if (o.cancel) to.cancelled = [c = o.cancel] { return c->load(); };
-  to.on_step = [&](int e, int s, int steps, double l) {
-    if (o.progress)
-      o.progress({"training", (e - 1) * steps + s, o.epochs * steps,
-                  fmt::format("epoch {}/{} loss {:.4f}", e, o.epochs, l)});
-  };
-  to.on_epoch = [&](int e, double l) {
-    spdlog::info("training: epoch {}/{} mean loss {:.4f}", e, o.epochs, l);
-  };
-  std::unique_ptr<CameraRefinement> refinement;
-  if (o.refine_poses != "none" || o.refine_focal) {
-    std::vector<Pose> start;
-    int fixed = -1;
-    for (int k = 0; k < n; ++k) {
-      start.push_back(cams[k].pose);
-      if (fixed < 0 && cams[k].registered) fixed = k;
-    }
-    CameraRefinementOptions co;
-    co.rotations = o.refine_poses != "none";
-    co.translations = o.refine_poses == "full";
-    co.focal = o.refine_focal;
-    refinement = std::make_unique<CameraRefinement>(start, std::max(fixed, 0), co);
-    to.cameras = refinement.get();
-  }
   t = Clock::now();
-  RunResult res;
-  res.initial_loss = evaluate_geometric_loss(*net, load_frame, pairs, to.lambda_disparity);
-  TrainingResult tr = train_test_time(*net, load_frame, pairs, to);
+  const TrainingStage tr = run_training_stage(o, *net, load_frame, flow, usable, poses.source,
+                                              precision, cams, dsize, cache);
   timings["training"] = since(t);
-  if (o.stop_after_epochs >= 0 && static_cast<int>(tr.epoch_losses.size()) < o.epochs)
-    fail(ErrorCategory::cancelled, "stopped after epoch {} (test hook)", tr.epoch_losses.size());
-  res.final_loss =
-      evaluate_geometric_loss(*net, load_frame, pairs, to.lambda_disparity, refinement.get());
-  json refinement_info;
-  if (refinement) {
-    // The outputs carry the refined cameras.
-    std::vector<Pose> refined = refinement->poses();
-    double fs = refinement->focal_scale_value();
-    for (int k = 0; k < n; ++k) {
-      cams[k].pose = refined[k];
-      cams[k].intrinsics.fx *= fs;
-      cams[k].intrinsics.fy *= fs;
-    }
-    refinement_info = refinement->summary();
-    spdlog::info("camera refinement: rotations changed by {:.3f} deg on average, focal x{:.4f}",
-                 refinement_info["rotation_change_deg"]["mean"].get<double>(), fs);
-  }
+  RunResult res;
+  res.initial_loss = tr.initial_loss;
+  res.final_loss = tr.final_loss;
 
   // 8. Outputs (a failure while writing them, e.g. a full disk, removes the partial ones);
   // rank 0 writes them.
@@ -478,7 +216,7 @@ RunResult run_pipeline(const RunOptions& o) {
     res.frame_names = frames.names;
     res.cameras = cams;
     res.depths = outs.depths;
-    res.epoch_losses = tr.epoch_losses;
+    res.epoch_losses = tr.result.epoch_losses;
     return res;
   }
   PartialOutputsGuard partial_outputs(o.out);
@@ -497,18 +235,18 @@ RunResult run_pipeline(const RunOptions& o) {
   {
     std::map<std::string, SparseDepthFrame> sd;
     for (int k = 0; k < n; ++k) {
-      if (sparse[k].z.empty()) continue;
+      const SparseDepth& sp = initial.sparse[k];
+      if (sp.z.empty()) continue;
       SparseDepthFrame& f = sd[frames.names[k]];
       f.width = cams[k].intrinsics.width;
       f.height = cams[k].intrinsics.height;
-      for (size_t q = 0; q < sparse[k].z.size(); ++q)
-        f.points.push_back({sparse[k].u[q], sparse[k].v[q], sparse[k].z[q]});
+      for (size_t q = 0; q < sp.z.size(); ++q) f.points.push_back({sp.u[q], sp.v[q], sp.z[q]});
     }
     write_sparse_depth_csv(o.out / "sparse_depth.csv", sd);
   }
   fs::create_directories(o.out / "depth_initial");
   for (int k = 0; k < n; ++k)
-    write_pfm(o.out / "depth_initial" / (frames.names[k] + ".pfm"), initial[k]);
+    write_pfm(o.out / "depth_initial" / (frames.names[k] + ".pfm"), initial.depths[k]);
   timings["outputs"] = since(t);
   timings["total"] = since(t_all);
 
@@ -518,9 +256,9 @@ RunResult run_pipeline(const RunOptions& o) {
   res.cameras = cams;
   res.depths = outs.depths;
   res.depth_intrinsics = cams[0].intrinsics;
-  res.num_pairs = static_cast<int>(pairs.size());
+  res.num_pairs = static_cast<int>(tr.num_pairs);
   res.num_pairs_dropped = flow.dropped;
-  res.epoch_losses = tr.epoch_losses;
+  res.epoch_losses = tr.result.epoch_losses;
   info["network"] = net_desc;
   info["depth_size"] = {dsize.width, dsize.height};
   info["frame_stats"] = {{"count", n},
@@ -538,40 +276,37 @@ RunResult run_pipeline(const RunOptions& o) {
                     {cams[0].intrinsics.fx, cams[0].intrinsics.fy, cams[0].intrinsics.cx,
                      cams[0].intrinsics.cy}},
                    {"details", poses.info}};
-  info["calibration"] = calib;
-  if (!refinement_info.is_null()) info["camera_refinement"] = refinement_info;
+  info["calibration"] = initial.calibration;
+  if (!tr.refinement.is_null()) info["camera_refinement"] = tr.refinement;
   {
     int64_t count = 0;
-    for (auto& sp : sparse) count += static_cast<int64_t>(sp.z.size());
-    info["sparse_points"] = {{"source", have_sfm_points ? "sfm" : "flow triangulation"},
+    for (auto& sp : initial.sparse) count += static_cast<int64_t>(sp.z.size());
+    info["sparse_points"] = {{"source", points.from_sfm ? "sfm" : "flow triangulation"},
                              {"observations", count},
                              {"file", "sparse_depth.csv"}};
-    if (!sparse_info.is_null()) info["sparse_points"]["triangulation"] = sparse_info;
+    if (!points.triangulation.is_null())
+      info["sparse_points"]["triangulation"] = points.triangulation;
   }
   info["pairs"] = {{"kept", res.num_pairs},
                    {"dropped", flow.dropped},
-                   {"storage", stream ? "streamed from cache/flow" : "memory"}};
+                   {"storage", tr.streamed ? "streamed from cache/flow" : "memory"}};
   info["processes"] = {{"count", pg.size()}, {"group", pg.name()}};
-  if (pg.size() > 1) info["processes"]["allreduce_bytes_per_step"] = tr.bytes_per_step;
-  info["training"] = {
-      {"epochs", o.epochs},
-      {"steps_per_epoch",
-       to.steps_per_epoch > 0
-           ? to.steps_per_epoch
-           : static_cast<int>((res.num_pairs + to.batch_pairs - 1) / to.batch_pairs)},
-      {"pairs_per_epoch", to.steps_per_epoch > 0 ? "step budget (--steps)" : "every pair"},
-      {"batch_pairs", to.batch_pairs},
-      {"lr", to.lr},
-      {"lambda", to.lambda_disparity},
-      {"seed", o.seed},
-      {"precision", precision_name(precision)},
-      {"precision_unit",
-       precision == ComputePrecision::bf16 ? bf16_unit() : std::string("f32 FMA")},
-      {"epoch_losses", tr.epoch_losses},
-      {"skipped_steps", tr.skipped_steps},
-      {"resumed_from_epoch", tr.resumed_from_epoch},
-      {"geometric_loss_before", res.initial_loss},
-      {"geometric_loss_after", res.final_loss}};
+  if (pg.size() > 1) info["processes"]["allreduce_bytes_per_step"] = tr.result.bytes_per_step;
+  info["training"] = {{"epochs", o.epochs},
+                      {"steps_per_epoch", tr.steps_per_epoch},
+                      {"pairs_per_epoch", tr.step_budget ? "step budget (--steps)" : "every pair"},
+                      {"batch_pairs", tr.batch_pairs},
+                      {"lr", tr.lr},
+                      {"lambda", tr.lambda},
+                      {"seed", o.seed},
+                      {"precision", precision_name(precision)},
+                      {"precision_unit",
+                       precision == ComputePrecision::bf16 ? bf16_unit() : std::string("f32 FMA")},
+                      {"epoch_losses", tr.result.epoch_losses},
+                      {"skipped_steps", tr.result.skipped_steps},
+                      {"resumed_from_epoch", tr.result.resumed_from_epoch},
+                      {"geometric_loss_before", res.initial_loss},
+                      {"geometric_loss_after", res.final_loss}};
   info["timings_s"] = timings;
   // Peak resident memory of this process and of the largest subprocess (COLMAP, ffmpeg) so far;
   // a resumed run reports its own.

@@ -8,8 +8,4 @@ namespace cvd {
 
 RunResult run_pipeline(const RunOptions& options);
 
-// Default (lr, lambda) of the paper per architecture (docs/design.md 5.7; models/depth_net_architectures.h).
-double default_learning_rate(const std::string& arch);
-double default_lambda(const std::string& arch);
-
 }  // namespace cvd

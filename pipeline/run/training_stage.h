@@ -1,0 +1,42 @@
+// Stage 7 of run_pipeline: test-time training (paper section 4) on the kept flow pairs with the
+// final cameras, resumable from cache/training, optionally refining the cameras with the network
+// (--refine-poses / --refine-focal; the refined cameras replace `cams`).
+#pragma once
+#include <filesystem>
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "engine/compute_precision.h"
+#include "models/depth_net.h"
+#include "pipeline/run/run_options.h"
+#include "pipeline/run/run_stages.h"
+#include "pipeline/training/test_time_training.h"
+
+namespace cvd {
+
+struct TrainingStage {
+  TrainingResult result;
+  int epochs = 0;
+  int steps_per_epoch = 0;  // as run: the --steps budget's, or one batch per pair group
+  bool step_budget = false;
+  int batch_pairs = 0;
+  double lr = 0, lambda = 0;
+  size_t num_pairs = 0;
+  bool streamed = false;                    // pairs read from cache/flow per batch
+  double initial_loss = 0, final_loss = 0;  // geometric loss over all pairs, before and after
+  nlohmann::json refinement;                // the cameras' corrections (null without refinement)
+};
+
+// `cams` at the depth resolution (refined in place); `usable` the user masks (empty: none);
+// `poses_source` and `precision` enter the resume key, so a changed setting restarts training.
+TrainingStage run_training_stage(const RunOptions& o, DepthNet& net,
+                                 const std::function<Tensor(int)>& load_frame,
+                                 const FlowStage& flow, const std::vector<cv::Mat>& usable,
+                                 const std::string& poses_source, ComputePrecision precision,
+                                 std::vector<FrameCamera>& cams, cv::Size depth_size,
+                                 const std::filesystem::path& cache);
+
+}  // namespace cvd

@@ -98,4 +98,23 @@ void require_success(const CommandRun& run, const std::string& subcommand, const
          run.exit_code, log.string(), tail_lines(log, 8));
 }
 
+std::vector<std::string> bundle_adjuster_args(const std::filesystem::path& input,
+                                              const std::filesystem::path& output,
+                                              bool refine_focal) {
+  return {"--input_path",
+          input.string(),
+          "--output_path",
+          output.string(),
+          "--BundleAdjustment.refine_focal_length",
+          refine_focal ? "1" : "0",
+          "--BundleAdjustment.refine_principal_point",
+          "0",
+          "--BundleAdjustment.refine_extra_params",
+          "0",
+          "--BundleAdjustment.function_tolerance",
+          "1e-6",
+          "--BundleAdjustment.max_num_iterations",
+          "50"};
+}
+
 }  // namespace cvd::colmap

@@ -82,11 +82,7 @@ RegisteredModel register_remaining_frames(const fs::path& exe, const fs::path& w
     return r;
   }
   CommandRun ba = run_logged(exe, "bundle_adjuster",
-                             {"--input_path", registered.string(), "--output_path",
-                              adjusted.string(), "--BundleAdjustment.refine_focal_length",
-                              refine_focal ? "1" : "0", "--BundleAdjustment.refine_principal_point",
-                              "0", "--BundleAdjustment.refine_extra_params", "0"},
-                             result);
+                             bundle_adjuster_args(registered, adjusted, refine_focal), result);
   fs::path final_model = adjusted;
   if (ba.exit_code != 0) {
     std::string w = fmt::format(

@@ -24,6 +24,7 @@ namespace cvd {
 namespace {
 
 namespace fs = std::filesystem;
+using colmap::bundle_adjuster_args;
 using colmap::check_frames;
 using colmap::choose_keyframes;
 using colmap::clear_stage_files;
@@ -112,12 +113,8 @@ void refine_focal(const fs::path& exe, const fs::path& work_dir, const ColmapOpt
   fs::remove_all(txt);
   fs::create_directories(out);
   fs::create_directories(txt);
-  CommandRun ba = run_logged(
-      exe, "bundle_adjuster",
-      {"--input_path", best.model_dir.string(), "--output_path", out.string(),
-       "--BundleAdjustment.refine_focal_length", "1", "--BundleAdjustment.refine_principal_point",
-       "0", "--BundleAdjustment.refine_extra_params", "0"},
-      result);
+  CommandRun ba =
+      run_logged(exe, "bundle_adjuster", bundle_adjuster_args(best.model_dir, out, true), result);
   auto reject = [&](const std::string& why) {
     std::string w =
         fmt::format("the focal refinement was not used ({}); keeping the searched focal {:.1f} px",

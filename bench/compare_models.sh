@@ -4,8 +4,9 @@
 # 384x224, MiDaS small at 256x160, Depth Anything V2 ViT-S at 518x392 (DA2_HEIGHT / DA2_WIDTH). Each configuration runs in its own process (one warm-up
 # iteration, then ITERS timed) so that peak RSS is its own. Prints a table: seconds, the ratio
 # PyTorch / ours (> 1: we are faster), peak RSS of each, MFU against PEAK_GFLOPS and, for a
-# training step, the relative difference of the two losses (same weights, inputs and loss, so it
-# shows both sides computed the same step). The training loss is the CVD geometric loss on 4
+# training step, the relative difference of the two losses (same weights and loss; the input
+# images are drawn by each side's own seeded generator, so it shows a step of the same size, not
+# bit parity: tests/test_models.cpp checks that; for inference, of the output sums). The training loss is the CVD geometric loss on 4
 # synthetic pairs (LOSS=surrogate: mean(output * R)). PRECISION=bf16 runs ours with
 # --precision bf16 (PyTorch stays f32).
 #

@@ -151,8 +151,8 @@ TEST(DepthAnythingV2, LargerEncodersScaleByWidth) {
   EXPECT_EQ(cfg.features, 64);
   EXPECT_EQ(cfg.out_channels, (std::array<int64_t, 4>{48, 96, 192, 384}));
   EXPECT_EQ(half->arch(), "depth_anything_v2_vitb");
-  const auto& large = dynamic_cast<const DepthAnythingV2Net&>(
-      *create_depth_net("depth_anything_v2_vitl", 1.0 / 16, gen));
+  const auto large_net = create_depth_net("depth_anything_v2_vitl", 1.0 / 16, gen);
+  const auto& large = dynamic_cast<const DepthAnythingV2Net&>(*large_net);
   EXPECT_EQ(large.config().vit.depth, 24);
   EXPECT_EQ(large.config().layers, (std::array<int, 4>{4, 11, 17, 23}));
   // ViT-L's 16 heads need 16 channels or more: width 1/128 leaves 8.

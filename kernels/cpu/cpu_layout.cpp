@@ -12,10 +12,6 @@ namespace cvd::cpu {
 
 namespace {
 
-bool is_cpu_f32_contiguous(const Tensor& t) {
-  return t.defined() && t.device().is_cpu() && t.dtype() == DType::f32 && t.is_contiguous();
-}
-
 int64_t dims_product(const Shape& s, int begin, int end) {
   int64_t p = 1;
   for (int d = begin; d < end; ++d) p *= s[d];

@@ -2,8 +2,14 @@
 // (register_cpu_openmp.cpp) calls them all.
 #pragma once
 #include "engine/dispatch.h"
+#include "engine/tensor.h"
 
 namespace cvd::cpu {
+
+// Whether t is a defined, contiguous f32 tensor on the CPU (the fast paths' precondition).
+inline bool is_cpu_f32_contiguous(const Tensor& t) {
+  return t.defined() && t.device().is_cpu() && t.dtype() == DType::f32 && t.is_contiguous();
+}
 
 void register_pointwise_kernels(KernelRegistry& r);    // cpu_pointwise.cpp
 void register_broadcast_kernels(KernelRegistry& r);    // cpu_broadcast.cpp

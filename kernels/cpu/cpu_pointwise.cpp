@@ -14,10 +14,6 @@ namespace cvd::cpu {
 
 namespace {
 
-bool is_cpu_f32_contiguous(const Tensor& t) {
-  return t.defined() && t.device().is_cpu() && t.dtype() == DType::f32 && t.is_contiguous();
-}
-
 // dst (contiguous, f32 or f64) = src (f32, any strides incl. broadcast).
 template <class D>
 void copy_rows(const Tensor& src, const Tensor& dst) {

@@ -116,6 +116,13 @@ dnnl::memory tensor_memory(const Tensor& t, const dnnl::memory::desc& md) {
   return dnnl::memory(md, cpu_engine(), t.data_ptr());
 }
 
+void check_f32_4d(const Tensor& t, const char* file, const char* what) {
+  if (t.dtype() != DType::f32 || t.dim() != 4 || !t.is_contiguous()) {
+    fail(ErrorCategory::internal, "{}: {} must be a contiguous f32 4-d tensor, got {}", file, what,
+         t.str());
+  }
+}
+
 ReorderedWeight::ReorderedWeight(const dnnl::memory::desc& user_md,
                                  const dnnl::memory::desc& prim_md)
     : user_md_(user_md),

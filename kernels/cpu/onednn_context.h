@@ -115,6 +115,9 @@ inline constexpr int kNumScratchSlots = 8;
 // A dnnl memory of `md` over a tensor's data (the tensor must be contiguous and large enough).
 dnnl::memory tensor_memory(const Tensor& t, const dnnl::memory::desc& md);
 
+// Fails (an internal error naming `file` and `what`) unless t is a contiguous f32 4-d tensor.
+void check_f32_4d(const Tensor& t, const char* file, const char* what);
+
 // A weight tensor reordered from its plain layout into a primitive's layout, redone only when the
 // tensor's storage, offset or version changed (or the weight cache is disabled).
 class ReorderedWeight {

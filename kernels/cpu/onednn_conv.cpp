@@ -8,6 +8,7 @@
 #include "engine/kernel_params.h"
 #include "kernels/cpu/cpu_parallel.h"
 #include "kernels/cpu/depthwise_conv2d.h"
+#include "kernels/cpu/onednn_context.h"
 #include "kernels/cpu/onednn_conv_family.h"
 #include "kernels/cpu/onednn_kernels.h"
 
@@ -16,14 +17,6 @@ namespace cvd::onednn {
 namespace {
 
 using tag = dnnl::memory::format_tag;
-
-void check_f32_4d(const Tensor& t, const char* what) {
-  if (t.dtype() != DType::f32 || t.dim() != 4 || !t.is_contiguous()) {
-    fail(ErrorCategory::internal,
-         "kernels/cpu/onednn_conv.cpp: {} must be a contiguous f32 4-d tensor, got {}", what,
-         t.str());
-  }
-}
 
 // x [N, C, H, W], w [O, C/g, KH, KW], y [N, O, OH, OW].
 ConvProblem conv_problem(const Shape& x, const Shape& w, const Shape& y, const Conv2dParams& p,
@@ -66,9 +59,9 @@ void zero_fill(const Tensor& t) {
 // in {x, w, b?}, out {y}; Conv2dParams.
 void conv2d(const KernelArgs& a) {
   const Tensor &x = a.in[0], &w = a.in[1], &b = a.in[2], &y = a.out[0];
-  check_f32_4d(x, "conv2d input");
-  check_f32_4d(w, "conv2d weight");
-  check_f32_4d(y, "conv2d output");
+  check_f32_4d(x, "kernels/cpu/onednn_conv.cpp", "conv2d input");
+  check_f32_4d(w, "kernels/cpu/onednn_conv.cpp", "conv2d weight");
+  check_f32_4d(y, "kernels/cpu/onednn_conv.cpp", "conv2d output");
   if (y.numel() == 0) return;
   const ConvProblem pr =
       conv_problem(x.shape(), w.shape(), y.shape(), a.p<Conv2dParams>(), b.defined());
@@ -93,9 +86,9 @@ void conv2d(const KernelArgs& a) {
 // in {gy, w}, out {gx}; Conv2dParams.
 void conv2d_backward_data(const KernelArgs& a) {
   const Tensor &gy = a.in[0], &w = a.in[1], &gx = a.out[0];
-  check_f32_4d(gy, "conv2d_backward_data output gradient");
-  check_f32_4d(w, "conv2d_backward_data weight");
-  check_f32_4d(gx, "conv2d_backward_data input gradient");
+  check_f32_4d(gy, "kernels/cpu/onednn_conv.cpp", "conv2d_backward_data output gradient");
+  check_f32_4d(w, "kernels/cpu/onednn_conv.cpp", "conv2d_backward_data weight");
+  check_f32_4d(gx, "kernels/cpu/onednn_conv.cpp", "conv2d_backward_data input gradient");
   if (gx.numel() == 0) return;
   const ConvProblem pr =
       conv_problem(gx.shape(), w.shape(), gy.shape(), a.p<Conv2dParams>(), false);
@@ -115,9 +108,9 @@ void conv2d_backward_data(const KernelArgs& a) {
 // in {gy, x}, out {gw, gb?}; Conv2dParams.
 void conv2d_backward_weight(const KernelArgs& a) {
   const Tensor &gy = a.in[0], &x = a.in[1], &gw = a.out[0], &gb = a.out[1];
-  check_f32_4d(gy, "conv2d_backward_weight output gradient");
-  check_f32_4d(x, "conv2d_backward_weight input");
-  check_f32_4d(gw, "conv2d_backward_weight weight gradient");
+  check_f32_4d(gy, "kernels/cpu/onednn_conv.cpp", "conv2d_backward_weight output gradient");
+  check_f32_4d(x, "kernels/cpu/onednn_conv.cpp", "conv2d_backward_weight input");
+  check_f32_4d(gw, "kernels/cpu/onednn_conv.cpp", "conv2d_backward_weight weight gradient");
   if (x.shape()[0] == 0) {
     zero_fill(gw);
     zero_fill(gb);

@@ -5,6 +5,7 @@
 
 #include "engine/error.h"
 #include "engine/kernel_params.h"
+#include "kernels/cpu/onednn_context.h"
 #include "kernels/cpu/onednn_conv_family.h"
 #include "kernels/cpu/onednn_kernels.h"
 
@@ -13,14 +14,6 @@ namespace cvd::onednn {
 namespace {
 
 using tag = dnnl::memory::format_tag;
-
-void check_f32_4d(const Tensor& t, const char* what) {
-  if (t.dtype() != DType::f32 || t.dim() != 4 || !t.is_contiguous()) {
-    fail(ErrorCategory::internal,
-         "kernels/cpu/onednn_deconv.cpp: {} must be a contiguous f32 4-d tensor, got {}", what,
-         t.str());
-  }
-}
 
 // x [N, C_in, H, W], w [C_in, C_out/g, KH, KW], y [N, C_out, OH, OW]. oneDNN's deconvolution
 // output size is (H - 1) * s - pad_l - pad_r + d * (k - 1) + 1, so output_padding enters as
@@ -54,9 +47,9 @@ void zero_fill(const Tensor& t) {
 // in {x, w, b?}, out {y}; ConvTranspose2dParams.
 void conv_transpose2d(const KernelArgs& a) {
   const Tensor &x = a.in[0], &w = a.in[1], &b = a.in[2], &y = a.out[0];
-  check_f32_4d(x, "conv_transpose2d input");
-  check_f32_4d(w, "conv_transpose2d weight");
-  check_f32_4d(y, "conv_transpose2d output");
+  check_f32_4d(x, "kernels/cpu/onednn_deconv.cpp", "conv_transpose2d input");
+  check_f32_4d(w, "kernels/cpu/onednn_deconv.cpp", "conv_transpose2d weight");
+  check_f32_4d(y, "kernels/cpu/onednn_deconv.cpp", "conv_transpose2d output");
   if (y.numel() == 0) return;
   const ConvProblem pr =
       deconv_problem(x.shape(), w.shape(), y.shape(), a.p<ConvTranspose2dParams>(), b.defined());
@@ -71,9 +64,11 @@ void conv_transpose2d(const KernelArgs& a) {
 // in {gy, w}, out {gx}.
 void conv_transpose2d_backward_data(const KernelArgs& a) {
   const Tensor &gy = a.in[0], &w = a.in[1], &gx = a.out[0];
-  check_f32_4d(gy, "conv_transpose2d_backward_data output gradient");
-  check_f32_4d(w, "conv_transpose2d_backward_data weight");
-  check_f32_4d(gx, "conv_transpose2d_backward_data input gradient");
+  check_f32_4d(gy, "kernels/cpu/onednn_deconv.cpp",
+               "conv_transpose2d_backward_data output gradient");
+  check_f32_4d(w, "kernels/cpu/onednn_deconv.cpp", "conv_transpose2d_backward_data weight");
+  check_f32_4d(gx, "kernels/cpu/onednn_deconv.cpp",
+               "conv_transpose2d_backward_data input gradient");
   if (gx.numel() == 0) return;
   const ConvProblem pr =
       deconv_problem(gx.shape(), w.shape(), gy.shape(), a.p<ConvTranspose2dParams>(), false);
@@ -83,9 +78,11 @@ void conv_transpose2d_backward_data(const KernelArgs& a) {
 // in {gy, x}, out {gw, gb?}.
 void conv_transpose2d_backward_weight(const KernelArgs& a) {
   const Tensor &gy = a.in[0], &x = a.in[1], &gw = a.out[0], &gb = a.out[1];
-  check_f32_4d(gy, "conv_transpose2d_backward_weight output gradient");
-  check_f32_4d(x, "conv_transpose2d_backward_weight input");
-  check_f32_4d(gw, "conv_transpose2d_backward_weight weight gradient");
+  check_f32_4d(gy, "kernels/cpu/onednn_deconv.cpp",
+               "conv_transpose2d_backward_weight output gradient");
+  check_f32_4d(x, "kernels/cpu/onednn_deconv.cpp", "conv_transpose2d_backward_weight input");
+  check_f32_4d(gw, "kernels/cpu/onednn_deconv.cpp",
+               "conv_transpose2d_backward_weight weight gradient");
   if (x.shape()[0] == 0) {
     zero_fill(gw);
     zero_fill(gb);

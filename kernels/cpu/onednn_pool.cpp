@@ -24,14 +24,6 @@ namespace {
 
 using tag = dnnl::memory::format_tag;
 
-void check_f32_4d(const Tensor& t, const char* what) {
-  if (t.dtype() != DType::f32 || t.dim() != 4 || !t.is_contiguous()) {
-    fail(ErrorCategory::internal,
-         "kernels/cpu/onednn_pool.cpp: {} must be a contiguous f32 4-d tensor, got {}", what,
-         t.str());
-  }
-}
-
 // Pooling of planes [N*C] of h x w into oh x ow.
 struct PoolGeometry {
   int64_t n, c, h, w, oh, ow;
@@ -225,8 +217,8 @@ void avg_pool_backward_by_hand(const Tensor& gy, const Tensor& gx, const Pool2dP
 // in {x}, out {y}; Pool2dParams.
 void max_pool2d(const KernelArgs& a) {
   const Tensor &x = a.in[0], &y = a.out[0];
-  check_f32_4d(x, "max_pool2d input");
-  check_f32_4d(y, "max_pool2d output");
+  check_f32_4d(x, "kernels/cpu/onednn_pool.cpp", "max_pool2d input");
+  check_f32_4d(y, "kernels/cpu/onednn_pool.cpp", "max_pool2d output");
   if (y.numel() == 0) return;
   try {
     run_forward(x, y, a.p<Pool2dParams>(), true);
@@ -238,9 +230,9 @@ void max_pool2d(const KernelArgs& a) {
 // in {gy, x}, out {gx}: each output's gradient goes to its window's first maximum.
 void max_pool2d_backward(const KernelArgs& a) {
   const Tensor &gy = a.in[0], &x = a.in[1], &gx = a.out[0];
-  check_f32_4d(gy, "max_pool2d_backward output gradient");
-  check_f32_4d(x, "max_pool2d_backward input");
-  check_f32_4d(gx, "max_pool2d_backward input gradient");
+  check_f32_4d(gy, "kernels/cpu/onednn_pool.cpp", "max_pool2d_backward output gradient");
+  check_f32_4d(x, "kernels/cpu/onednn_pool.cpp", "max_pool2d_backward input");
+  check_f32_4d(gx, "kernels/cpu/onednn_pool.cpp", "max_pool2d_backward input gradient");
   const Pool2dParams& p = a.p<Pool2dParams>();
   const PoolGeometry g = geometry(x, gy);
   const float* xp = x.data<float>();
@@ -266,8 +258,8 @@ void max_pool2d_backward(const KernelArgs& a) {
 // in {x}, out {y}; Pool2dParams.
 void avg_pool2d(const KernelArgs& a) {
   const Tensor &x = a.in[0], &y = a.out[0];
-  check_f32_4d(x, "avg_pool2d input");
-  check_f32_4d(y, "avg_pool2d output");
+  check_f32_4d(x, "kernels/cpu/onednn_pool.cpp", "avg_pool2d input");
+  check_f32_4d(y, "kernels/cpu/onednn_pool.cpp", "avg_pool2d output");
   if (y.numel() == 0) return;
   const Pool2dParams& p = a.p<Pool2dParams>();
   if (p.count_include_pad && !windows_inside_padding(geometry(x, y), p)) {
@@ -285,8 +277,8 @@ void avg_pool2d(const KernelArgs& a) {
 void avg_pool2d_backward(const KernelArgs& a) {
   static PrimitiveCache<PoolEntry> cache;
   const Tensor &gy = a.in[0], &gx = a.out[0];
-  check_f32_4d(gy, "avg_pool2d_backward output gradient");
-  check_f32_4d(gx, "avg_pool2d_backward input gradient");
+  check_f32_4d(gy, "kernels/cpu/onednn_pool.cpp", "avg_pool2d_backward output gradient");
+  check_f32_4d(gx, "kernels/cpu/onednn_pool.cpp", "avg_pool2d_backward input gradient");
   if (gx.numel() == 0) return;
   const Pool2dParams& p = a.p<Pool2dParams>();
   const PoolGeometry g = geometry(gx, gy);

@@ -64,7 +64,7 @@ void run_convert(const ConvertArgs& a) {
   }
 }
 
-const CommandRegistration registration(60, [](CLI::App& app) {
+const CommandRegistration convert_registration(60, [](CLI::App& app) {
   auto args = std::make_shared<ConvertArgs>();
   CLI::App* sub = app.add_subcommand(
       "convert", "Convert an ONNX export of a depth network or FlowNet2 into a .cvdw weights file");

@@ -200,7 +200,7 @@ void run_demo(DemoCommand& d) {
   write_text_file(root / "demo_summary.json", summary.dump(2));
 }
 
-const CommandRegistration reg(10, [](CLI::App& app) {
+const CommandRegistration demo_registration(10, [](CLI::App& app) {
   auto st = std::make_shared<DemoCommand>();
   // The cost knobs come from --quality as for `cvd run`. The demo's scene is easy: the "fast"
   // preset with 8 epochs measured as accurate on it as the previous 256 px, 8-epoch default in a

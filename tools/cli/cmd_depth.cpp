@@ -140,7 +140,7 @@ void run_depth(const DepthArgs& a) {
                1000 * seconds / std::max<size_t>(1, names.size()), a.output);
 }
 
-const CommandRegistration registration(50, [](CLI::App& app) {
+const CommandRegistration depth_registration(50, [](CLI::App& app) {
   auto args = std::make_shared<DepthArgs>();
   CLI::App* sub = app.add_subcommand(
       "depth", "Single-image depth of an image, a folder of images or a video (no fine-tuning)");

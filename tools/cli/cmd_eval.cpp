@@ -51,7 +51,7 @@ void run_eval(const EvalArgs& a) {
   std::printf("wrote %s and %s\n", (out / "metrics.json").c_str(), (out / "report.html").c_str());
 }
 
-CommandRegistration reg(40, [](CLI::App& app) {
+CommandRegistration eval_registration(40, [](CLI::App& app) {
   auto args = std::make_shared<EvalArgs>();
   CLI::App* sub = app.add_subcommand("eval",
                                      "Evaluate a run: depth/pose metrics vs GT, "

@@ -112,7 +112,7 @@ void run_flow(const FlowArgs& a) {
   }
 }
 
-const CommandRegistration registration(40, [](CLI::App& app) {
+const CommandRegistration flow_registration(40, [](CLI::App& app) {
   auto args = std::make_shared<FlowArgs>();
   CLI::App* sub = app.add_subcommand("flow", "Dense optical flow of an image pair (A -> B)");
   sub->add_option("A", args->image_a, "First image")->required();

@@ -80,7 +80,7 @@ void run_inspect(const InspectOptions& o) {
   }
 }
 
-const CommandRegistration kRegistration(90, [](CLI::App& app) {
+const CommandRegistration inspect_registration(90, [](CLI::App& app) {
   auto opts = std::make_shared<InspectOptions>();
   CLI::App* sub = app.add_subcommand(
       "inspect",

@@ -103,7 +103,7 @@ void print_resume_hint(const RunOptions& o, const std::vector<std::string>& argv
       kept.empty() ? std::string("nothing yet") : fmt::format("{}", fmt::join(kept, ", ")), cmd);
 }
 
-const CommandRegistration reg(20, [](CLI::App& app) {
+const CommandRegistration run_registration(20, [](CLI::App& app) {
   auto st = std::make_shared<RunCommand>();
   CLI::App* c =
       app.add_subcommand("run", "Consistent depth and poses for a video or a folder of frames");

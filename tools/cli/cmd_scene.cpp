@@ -32,7 +32,7 @@ void run_scene_command(const SceneCommandOptions& o) {
                seconds);
 }
 
-const CommandRegistration registration(70, [](CLI::App& app) {
+const CommandRegistration scene_registration(70, [](CLI::App& app) {
   auto o = std::make_shared<SceneCommandOptions>();
   CLI::App* cmd = app.add_subcommand(
       "scene",

@@ -26,7 +26,7 @@ void run_view(ViewArgs& a) {
                s.file.string(), s.bytes / 1e6, s.points, s.cameras, s.frames_shown, s.frames);
 }
 
-const CommandRegistration registration(45, [](CLI::App& app) {
+const CommandRegistration view_registration(45, [](CLI::App& app) {
   auto args = std::make_shared<ViewArgs>();
   CLI::App* sub = app.add_subcommand(
       "view", "Write RUN/viewer.html: the run's point cloud and cameras in 3-D, a frame slider");

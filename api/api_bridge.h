@@ -1,7 +1,7 @@
-// Shared by the api/*.cpp sources: the internal headers (which define cvd::Error, cvd::Device,
-// cvd::FlowEstimator and cvd::FrameCamera of the engine and pipeline) come first, then aliases
-// for the internal names that the public API reuses in its inline namespace cvd::v1, then the
-// public headers, then the conversions between the public plain types and cv::Mat.
+// Shared by the api/*.cpp sources: the internal headers, the public headers, and the conversions
+// between the public plain types and cv::Mat. The internal names differ from the public ones (cvd::DeviceId vs the
+// public cvd::Device, cvd::OpticalFlow vs cvd::FlowEstimator, cvd::NamedCamera vs
+// cvd::FrameCamera), so either can be named after both are included.
 #pragma once
 // cvd::Error is thrown across the shared library's boundary: give its type info default visibility.
 #pragma GCC visibility push(default)
@@ -10,8 +10,7 @@
 
 #include <opencv2/core.hpp>
 
-// Every internal header any api/*.cpp needs is included here, before the public headers: after
-// them, the internal names cvd::Device, cvd::FlowEstimator and cvd::FrameCamera are ambiguous.
+// Every internal header any api/*.cpp needs is included here.
 #include "engine/autograd.h"
 #include "engine/backend_info.h"
 #include "engine/cvdw.h"
@@ -21,9 +20,9 @@
 #include "engine/random.h"
 #include "models/depth_net.h"
 #include "pipeline/flow/flow_dis.h"
-#include "pipeline/flow/flow_estimator.h"
 #include "pipeline/flow/flow_flownet2.h"
 #include "pipeline/flow/flow_pair.h"
+#include "pipeline/flow/optical_flow.h"
 #include "pipeline/geometry/camera.h"
 #include "pipeline/io/frame_source.h"
 #include "pipeline/run/quality_preset.h"
@@ -31,9 +30,6 @@
 #include "pipeline/run/run_stages.h"
 
 namespace cvd::api_bridge {
-using CoreDevice = ::cvd::Device;
-using CoreFlowEstimator = ::cvd::FlowEstimator;
-using CoreFrameCamera = ::cvd::FrameCamera;
 using CoreIntrinsics = ::cvd::Intrinsics;
 }  // namespace cvd::api_bridge
 

@@ -7,7 +7,7 @@
 namespace cvd::v1 {
 
 struct FlowEstimator::Impl {
-  std::unique_ptr<api_bridge::CoreFlowEstimator> estimator;
+  std::unique_ptr<OpticalFlow> estimator;
   FlowPairOptions pair_options;
 };
 

@@ -66,7 +66,7 @@ RunOptions to_run_options(const PipelineOptions& p) {
 PipelineResult to_result(const RunResult& r) {
   PipelineResult out;
   out.frame_names = r.frame_names;
-  for (const api_bridge::CoreFrameCamera& c : r.cameras) {
+  for (const NamedCamera& c : r.cameras) {
     FrameCamera fc;
     fc.name = c.name;
     const Eigen::Matrix4d m = c.pose.matrix();

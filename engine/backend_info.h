@@ -13,7 +13,7 @@ int cuda_device_count();
 // One line describing the CUDA runtime state (e.g. "2 devices" or why none is usable).
 std::string cuda_runtime_status();
 // Copies a contiguous tensor to another device (through the device backend's hook).
-Tensor device_copy(const Tensor& x, Device d);
+Tensor device_copy(const Tensor& x, DeviceId d);
 // Descriptions of the registered backends, e.g. {"reference", "cpu (oneDNN 2.6, OpenMP)", "cuda"}.
 std::vector<std::string> compiled_backends();
 

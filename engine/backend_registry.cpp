@@ -78,7 +78,7 @@ std::string cuda_runtime_status() {
   return b->runtime_status ? b->runtime_status() : "unknown";
 }
 
-Tensor device_copy(const Tensor& x, Device d) {
+Tensor device_copy(const Tensor& x, DeviceId d) {
   const DeviceType other = x.device().is_cpu() ? d.type : x.device().type;
   const BackendHooks* b = find_backend(
       [&](const BackendHooks& h) { return h.device == other && h.device_copy != nullptr; });

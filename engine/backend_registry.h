@@ -24,7 +24,7 @@ struct BackendHooks {
   // Device backends (device != cpu): copies a contiguous tensor between the host and the device
   // or within the device; the number of usable devices; one line on the runtime's state.
   DeviceType device = DeviceType::cpu;
-  Tensor (*device_copy)(const Tensor& x, Device to) = nullptr;
+  Tensor (*device_copy)(const Tensor& x, DeviceId to) = nullptr;
   int (*device_count)() = nullptr;
   std::string (*runtime_status)() = nullptr;
 

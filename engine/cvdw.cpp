@@ -183,7 +183,7 @@ void write_cvdw(const std::filesystem::path& path, const std::string& model,
                 t.name);
       CVD_CHECK(t.tensor.defined(), "{}: tensor '{}' is undefined", path.string(), t.name);
       Tensor b = t.tensor.detach();
-      if (!b.device().is_cpu()) b = b.to(Device::cpu());
+      if (!b.device().is_cpu()) b = b.to(DeviceId::cpu());
       blobs.push_back(b.contiguous());
     }
   }
@@ -422,7 +422,7 @@ Tensor CvdwReader::load(const CvdwEntry& e) const {
   if (mapping_) {
     void* p = const_cast<uint8_t*>(blob(e));
     auto keep = mapping_;
-    auto storage = std::make_shared<Storage>(p, e.nbytes, Device::cpu(), [keep]() {});
+    auto storage = std::make_shared<Storage>(p, e.nbytes, DeviceId::cpu(), [keep]() {});
     t = Tensor::from_storage(std::move(storage), e.shape, e.dtype);
   } else {
     t = Tensor::empty(e.shape, e.dtype);

@@ -25,15 +25,15 @@ struct dtype_of<double> {
 enum class DeviceType : uint8_t { cpu = 0, cuda = 1 };
 inline constexpr int kNumDeviceTypes = 2;
 
-struct Device {
+struct DeviceId {
   DeviceType type = DeviceType::cpu;
   int index = 0;
-  static Device cpu() { return {DeviceType::cpu, 0}; }
-  static Device cuda(int i = 0) { return {DeviceType::cuda, i}; }
+  static DeviceId cpu() { return {DeviceType::cpu, 0}; }
+  static DeviceId cuda(int i = 0) { return {DeviceType::cuda, i}; }
   bool is_cpu() const { return type == DeviceType::cpu; }
   bool is_cuda() const { return type == DeviceType::cuda; }
-  bool operator==(const Device& o) const { return type == o.type && index == o.index; }
-  bool operator!=(const Device& o) const { return !(*this == o); }
+  bool operator==(const DeviceId& o) const { return type == o.type && index == o.index; }
+  bool operator!=(const DeviceId& o) const { return !(*this == o); }
   std::string str() const {
     return type == DeviceType::cpu ? "cpu" : "cuda:" + std::to_string(index);
   }

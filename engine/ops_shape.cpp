@@ -169,7 +169,7 @@ Tensor Tensor::to(DType t) const {
 
 // Cross-device copies go through the device backend's hook (engine/backend_registry.h).
 
-Tensor Tensor::to(Device d) const {
+Tensor Tensor::to(DeviceId d) const {
   if (d == device()) return *this;
   Tensor y = device_copy(contiguous(), d);
   if (!any_requires_grad({*this})) return y;

@@ -20,7 +20,7 @@ class CpuAllocator final : public Allocator {
     return p;
   }
   void deallocate(void* p, size_t) override { std::free(p); }
-  Device device() const override { return Device::cpu(); }
+  DeviceId device() const override { return DeviceId::cpu(); }
 };
 
 Allocator* g_device_allocators[kNumDeviceTypes] = {nullptr, nullptr};
@@ -33,7 +33,7 @@ Allocator* cpu_allocator() {
   return &a;
 }
 
-Allocator* device_allocator(Device d) {
+Allocator* device_allocator(DeviceId d) {
   if (d.is_cpu()) return cpu_allocator();
   return g_device_allocators[static_cast<int>(d.type)];
 }
@@ -47,7 +47,7 @@ Storage::Storage(size_t nbytes, Allocator* alloc)
   data_ = alloc->allocate(nbytes);
 }
 
-Storage::Storage(void* data, size_t nbytes, Device device, std::function<void()> release)
+Storage::Storage(void* data, size_t nbytes, DeviceId device, std::function<void()> release)
     : data_(data),
       nbytes_(nbytes),
       device_(device),

@@ -14,13 +14,13 @@ class Allocator {
   virtual ~Allocator() = default;
   virtual void* allocate(size_t nbytes) = 0;
   virtual void deallocate(void* p, size_t nbytes) = 0;
-  virtual Device device() const = 0;
+  virtual DeviceId device() const = 0;
 };
 
 // 64-byte aligned host memory.
 Allocator* cpu_allocator();
 // Registered by the CUDA backend when compiled in; nullptr otherwise.
-Allocator* device_allocator(Device d);
+Allocator* device_allocator(DeviceId d);
 void set_device_allocator(DeviceType t, Allocator* a);
 
 class Storage {
@@ -28,14 +28,14 @@ class Storage {
   // Owns nbytes from `alloc`.
   Storage(size_t nbytes, Allocator* alloc);
   // Wraps foreign memory (e.g. an mmap'd weight file) with a custom release function.
-  Storage(void* data, size_t nbytes, Device device, std::function<void()> release);
+  Storage(void* data, size_t nbytes, DeviceId device, std::function<void()> release);
   ~Storage();
   Storage(const Storage&) = delete;
   Storage& operator=(const Storage&) = delete;
 
   void* data() const { return data_; }
   size_t nbytes() const { return nbytes_; }
-  Device device() const { return device_; }
+  DeviceId device() const { return device_; }
   // Bumped by every in-place write; lets caches (e.g. oneDNN weight reorders) and autograd
   // notice that saved data changed.
   uint64_t version() const { return version_.load(std::memory_order_relaxed); }
@@ -46,7 +46,7 @@ class Storage {
  private:
   void* data_ = nullptr;
   size_t nbytes_ = 0;
-  Device device_;
+  DeviceId device_;
   Allocator* alloc_ = nullptr;
   std::function<void()> release_;
   std::atomic<uint64_t> version_{0};

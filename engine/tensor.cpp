@@ -45,7 +45,7 @@ static void check_shape(const Shape& shape) {
   for (int64_t d : shape) CVD_CHECK(d >= 0, "negative size in shape {}", shape_str(shape));
 }
 
-Tensor Tensor::empty(const Shape& shape, DType dtype, Device device) {
+Tensor Tensor::empty(const Shape& shape, DType dtype, DeviceId device) {
   check_shape(shape);
   if (!device.is_cpu()) kernel_registry();  // registers the device allocators
   Allocator* a = device_allocator(device);
@@ -60,13 +60,13 @@ Tensor Tensor::empty(const Shape& shape, DType dtype, Device device) {
   return Tensor(std::move(impl));
 }
 
-Tensor Tensor::zeros(const Shape& shape, DType dtype, Device device) {
+Tensor Tensor::zeros(const Shape& shape, DType dtype, DeviceId device) {
   return full(shape, 0.0, dtype, device);
 }
-Tensor Tensor::ones(const Shape& shape, DType dtype, Device device) {
+Tensor Tensor::ones(const Shape& shape, DType dtype, DeviceId device) {
   return full(shape, 1.0, dtype, device);
 }
-Tensor Tensor::full(const Shape& shape, double value, DType dtype, Device device) {
+Tensor Tensor::full(const Shape& shape, double value, DType dtype, DeviceId device) {
   Tensor t = empty(shape, dtype, device);
   t.fill_(value);
   return t;
@@ -153,7 +153,7 @@ void* Tensor::data_ptr() const {
 
 std::vector<double> Tensor::to_vector() const {
   Tensor t = detach();
-  if (!t.device().is_cpu()) t = t.to(Device::cpu());
+  if (!t.device().is_cpu()) t = t.to(DeviceId::cpu());
   t = t.to(DType::f64).contiguous();
   const double* p = t.data<double>();
   return std::vector<double>(p, p + t.numel());
@@ -183,7 +183,7 @@ Tensor Tensor::detach() const {
 
 void Tensor::copy_(const Tensor& src) const {
   CVD_CHECK(is_contiguous(), "copy_ into a non-contiguous tensor {}", str());
-  CVD_CHECK(src.device() == device(), "copy_ across devices ({} -> {}): use to(Device)",
+  CVD_CHECK(src.device() == device(), "copy_ across devices ({} -> {}): use to(DeviceId)",
             src.device().str(), device().str());
   Tensor s = src.detach().expand(shape());
   Tensor dst = detach();

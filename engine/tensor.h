@@ -40,11 +40,14 @@ class Tensor {
   explicit Tensor(std::shared_ptr<TensorImpl> impl) : impl_(std::move(impl)) {}
 
   // ---- Factories ------------------------------------------------------------------------------
-  static Tensor empty(const Shape& shape, DType dtype = DType::f32, Device device = Device::cpu());
-  static Tensor zeros(const Shape& shape, DType dtype = DType::f32, Device device = Device::cpu());
-  static Tensor ones(const Shape& shape, DType dtype = DType::f32, Device device = Device::cpu());
+  static Tensor empty(const Shape& shape, DType dtype = DType::f32,
+                      DeviceId device = DeviceId::cpu());
+  static Tensor zeros(const Shape& shape, DType dtype = DType::f32,
+                      DeviceId device = DeviceId::cpu());
+  static Tensor ones(const Shape& shape, DType dtype = DType::f32,
+                     DeviceId device = DeviceId::cpu());
   static Tensor full(const Shape& shape, double value, DType dtype = DType::f32,
-                     Device device = Device::cpu());
+                     DeviceId device = DeviceId::cpu());
   static Tensor scalar(double value, DType dtype = DType::f32);
   // Copies `values` (row-major) into a new CPU tensor of `shape` converted to `dtype`.
   static Tensor from_vector(const std::vector<double>& values, const Shape& shape,
@@ -71,7 +74,7 @@ class Tensor {
   int64_t numel() const { return shape_numel(impl()->shape); }
   int64_t offset() const { return impl()->offset; }
   DType dtype() const { return impl()->dtype; }
-  Device device() const { return impl()->storage ? impl()->storage->device() : Device::cpu(); }
+  DeviceId device() const { return impl()->storage ? impl()->storage->device() : DeviceId::cpu(); }
   size_t element_size() const { return dtype_size(dtype()); }
   size_t nbytes() const { return static_cast<size_t>(numel()) * element_size(); }
   bool is_contiguous() const;
@@ -100,11 +103,11 @@ class Tensor {
   std::vector<float> to_float_vector() const;
 
   // ---- Conversions and copies (not recorded by autograd unless stated) ------------------------
-  Tensor contiguous() const;  // recorded; returns *this when already contiguous
-  Tensor clone() const;       // recorded; always copies
-  Tensor to(DType t) const;   // recorded
-  Tensor to(Device d) const;  // recorded
-  Tensor detach() const;      // shares storage, no autograd history
+  Tensor contiguous() const;    // recorded; returns *this when already contiguous
+  Tensor clone() const;         // recorded; always copies
+  Tensor to(DType t) const;     // recorded
+  Tensor to(DeviceId d) const;  // recorded
+  Tensor detach() const;        // shares storage, no autograd history
   // In-place: copies src (broadcast to this shape, any dtype) into this tensor's elements.
   void copy_(const Tensor& src) const;
   void fill_(double v) const;

@@ -21,7 +21,7 @@ Tensor upsample4_nearest(const Tensor& f) {
 }
 
 // Pixel coordinates along one axis, shaped [1, H, W, 1]: the x (axis 1) or y (axis 0) index.
-Tensor pixel_coordinates(int64_t h, int64_t w, int axis, DType dtype, Device device) {
+Tensor pixel_coordinates(int64_t h, int64_t w, int axis, DType dtype, DeviceId device) {
   std::vector<double> v(static_cast<size_t>(h * w));
   for (int64_t y = 0; y < h; ++y)
     for (int64_t x = 0; x < w; ++x) v[static_cast<size_t>(y * w + x)] = axis == 1 ? x : y;

@@ -287,7 +287,7 @@ TEST(ColmapRunner, PointsTriangulatedWithGivenPosesMatchTheMeasuredDepth) {
   std::vector<ColmapFrame> frames = kitchen_frames(data);
   auto gt = read_tum_trajectory(data / "groundtruth_rgb.txt");
   const Intrinsics K{525.0, 525.0, 320.0, 240.0, 640, 480};
-  std::vector<FrameCamera> cams;
+  std::vector<NamedCamera> cams;
   for (int i = 0; i < kFrames; ++i)
     cams.push_back({frames[i].name, gt[i * kStride].pose, K, true, 0});
   cams[7].registered = false;  // a frame without a pose is left out

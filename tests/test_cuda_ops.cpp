@@ -58,7 +58,7 @@ TEST_P(CudaOpTable, F32OnCudaVsReference) {
   std::vector<Tensor> in64, in_cuda;
   for (const auto& s : c.inputs) {
     Tensor t = make_input(s, g);
-    Tensor u = t.to(DType::f32).to(Device::cuda());
+    Tensor u = t.to(DType::f32).to(DeviceId::cuda());
     if (s.differentiable) {
       t.requires_grad_(true);
       u.requires_grad_(true);
@@ -85,7 +85,7 @@ TEST_P(CudaOpTable, F32OnCudaVsReference) {
     }
   const std::vector<Tensor> g64 = grad(sum(mul(out64, weights)), d64);
   const std::vector<Tensor> g_cuda =
-      grad(sum(mul(out_cuda, weights.to(DType::f32).to(Device::cuda()))), d_cuda);
+      grad(sum(mul(out_cuda, weights.to(DType::f32).to(DeviceId::cuda()))), d_cuda);
   for (size_t i = 0; i < g64.size(); ++i) {
     const std::vector<double> a = g64[i].to_vector(), b = g_cuda[i].to_vector();
     const double gs = std::max(1.0, max_abs(a));
@@ -109,9 +109,9 @@ TEST(CudaOps, MatmulShapesOnDevice) {
       const MatmulParams p{ta, tb};
       const Tensor c64 = Tensor::empty({b, m, n}, DType::f64);
       dispatch(OpId::matmul, a64, KernelArgs{{a64, b64}, {c64}, &p});
-      const Tensor ad = a64.to(DType::f32).to(Device::cuda());
-      const Tensor bd = b64.to(DType::f32).to(Device::cuda());
-      const Tensor cd = Tensor::empty({b, m, n}, DType::f32, Device::cuda());
+      const Tensor ad = a64.to(DType::f32).to(DeviceId::cuda());
+      const Tensor bd = b64.to(DType::f32).to(DeviceId::cuda());
+      const Tensor cd = Tensor::empty({b, m, n}, DType::f32, DeviceId::cuda());
       dispatch(OpId::matmul, ad, KernelArgs{{ad, bd}, {cd}, &p});
       const std::vector<double> r = c64.to_vector(), f = cd.to_vector();
       const double scale = std::max(1.0, max_abs(r));
@@ -150,12 +150,12 @@ TEST(CudaCoverage, NoGpuIsAClearErrorAndCpuWorkContinues) {
   EXPECT_FALSE(cuda_runtime_status().empty());
   const Tensor x = Tensor::ones({2, 3});
   try {
-    (void)x.to(Device::cuda());
+    (void)x.to(DeviceId::cuda());
     ADD_FAILURE() << "copying to CUDA without a GPU did not throw";
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("CUDA"), std::string::npos) << e.what();
   }
-  EXPECT_THROW((void)Tensor::zeros({4}, DType::f32, Device::cuda()), Error);
+  EXPECT_THROW((void)Tensor::zeros({4}, DType::f32, DeviceId::cuda()), Error);
   const Tensor y = x + x;  // the CPU keeps working
   EXPECT_EQ(y.to_vector(), std::vector<double>(6, 2.0));
 }

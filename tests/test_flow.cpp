@@ -308,7 +308,7 @@ TEST(Homography, ComposedFlowMatchesTheFormula) {
 }
 
 // Records what the wrapped flow method was given and returns zero flow.
-class RecordingZeroFlow final : public FlowEstimator {
+class RecordingZeroFlow final : public OpticalFlow {
  public:
   cv::Mat estimate(const cv::Mat& a, const cv::Mat& b) override {
     seen_a = a.clone();

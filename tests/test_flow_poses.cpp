@@ -196,7 +196,7 @@ SceneGroundTruth generated_clip(const fs::path& dir, int frames) {
   return read_scene_ground_truth(dir);
 }
 
-std::vector<Pose> poses_of(const std::vector<FrameCamera>& cams) {
+std::vector<Pose> poses_of(const std::vector<NamedCamera>& cams) {
   std::vector<Pose> p;
   for (const auto& c : cams) p.push_back(c.pose);
   return p;

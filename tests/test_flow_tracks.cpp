@@ -43,7 +43,7 @@ TEST(FlowTracks, PointsFromExactFlowLieOnTheSurfaceAndReachMostFrames) {
   so.supersampling = 1;
   const SyntheticScene s = render_synthetic_scene(so);
   const size_t n = s.frames.size();
-  std::vector<FrameCamera> cams(n);
+  std::vector<NamedCamera> cams(n);
   std::vector<cv::Mat> flows(n), masks(n);
   for (size_t k = 0; k < n; ++k) {
     cams[k].pose = s.frames[k].pose;
@@ -77,7 +77,7 @@ TEST(FlowTracks, PointsFromExactFlowLieOnTheSurfaceAndReachMostFrames) {
 
 TEST(FlowTracks, AnUntrustedPixelEndsTheTrackAndNoFlowNoPoints) {
   const size_t n = 4;
-  std::vector<FrameCamera> cams(n);
+  std::vector<NamedCamera> cams(n);
   for (size_t k = 0; k < n; ++k) {
     cams[k].intrinsics = {50, 50, 16, 16, 32, 32};
     cams[k].pose.t = Eigen::Vector3d(0.2 * double(k), 0, 0);

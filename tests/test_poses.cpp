@@ -206,7 +206,7 @@ TEST(ColmapModel, ConvertsWorldToCameraOnAHandMadeExample) {
   auto obs = m.observed_points("my frame 01.png");
   ASSERT_EQ(obs.size(), 1u);
   EXPECT_EQ(obs[0], xw);
-  FrameCamera fc = m.frame_camera("my frame 01.png");
+  NamedCamera fc = m.frame_camera("my frame 01.png");
   EXPECT_TRUE(fc.registered);
   EXPECT_DOUBLE_EQ(fc.intrinsics.fx, 500);
   EXPECT_DOUBLE_EQ(fc.intrinsics.fy, 500);
@@ -278,7 +278,7 @@ TEST(ColmapModel, FromFramesWritesRegisteredFramesOnly) {
   test::TempDir dir;
   std::mt19937 rng(4);
   Intrinsics k{525, 525, 320, 240, 640, 480};
-  std::vector<FrameCamera> frames = {{"a.png", random_pose(rng), k, true, 0},
+  std::vector<NamedCamera> frames = {{"a.png", random_pose(rng), k, true, 0},
                                      {"b.png", random_pose(rng), k, false, 0},
                                      {"c.png", random_pose(rng), k, true, 0}};
   write_colmap_text_model(dir.path(), colmap_model_from_frames(frames));
@@ -286,7 +286,7 @@ TEST(ColmapModel, FromFramesWritesRegisteredFramesOnly) {
   EXPECT_EQ(m.cameras.size(), 1u);
   EXPECT_EQ(m.images.size(), 2u);
   EXPECT_EQ(m.find_image("b.png"), nullptr);
-  FrameCamera c = m.frame_camera("c.png");
+  NamedCamera c = m.frame_camera("c.png");
   EXPECT_LT((c.pose.t - frames[2].pose.t).norm(), 1e-11);
   EXPECT_DOUBLE_EQ(c.intrinsics.fx, 525);
 }
@@ -450,11 +450,11 @@ TEST(PairSampling, MatchesThePaperDefinition) {
 struct PlaneScene {
   Intrinsics k{100, 100, 40, 30, 80, 60};
   double plane_z = 4.0;
-  std::vector<FrameCamera> cameras;
+  std::vector<NamedCamera> cameras;
 
   explicit PlaneScene(int n) {
     for (int i = 0; i < n; ++i) {
-      FrameCamera c;
+      NamedCamera c;
       c.name = "f" + std::to_string(i);
       c.intrinsics = k;
       c.pose.R = Eigen::AngleAxisd(0.03 * i, Eigen::Vector3d::UnitY()).toRotationMatrix() *
@@ -464,16 +464,16 @@ struct PlaneScene {
     }
   }
   // Depth (camera z) of the plane seen through pixel (u, v) of camera c.
-  double depth(const FrameCamera& c, double u, double v) const {
+  double depth(const NamedCamera& c, double u, double v) const {
     Eigen::Vector3d ray((u - k.cx) / k.fx, (v - k.cy) / k.fy, 1.0);  // z = 1 in camera
     Eigen::Vector3d dir = c.pose.R * ray;
     return (plane_z - c.pose.t.z()) / dir.z();
   }
-  Eigen::Vector3d backproject(const FrameCamera& c, double u, double v, double z) const {
+  Eigen::Vector3d backproject(const NamedCamera& c, double u, double v, double z) const {
     return c.pose.transform(Eigen::Vector3d((u - k.cx) / k.fx * z, (v - k.cy) / k.fy * z, z));
   }
   // The "network" depth map: scale * true depth, with multiplicative noise and holes.
-  cv::Mat network_depth(const FrameCamera& c, double scale, double noise, std::mt19937& rng) const {
+  cv::Mat network_depth(const NamedCamera& c, double scale, double noise, std::mt19937& rng) const {
     std::normal_distribution<double> n(0.0, noise);
     std::uniform_real_distribution<double> u01(0, 1);
     cv::Mat d(k.height, k.width, CV_32F);
@@ -551,8 +551,8 @@ TEST(ScaleCalibration, ScaledPosesAgreeWithNetworkDepth) {
   ScaleCalibrationResult r = calibrate_scale(scene.cameras, depths, points);
   // Tolerance: bilinear sampling of a plane's depth (not linear in pixels) over 5% holes.
   EXPECT_NEAR(r.scale, true_scale, 1e-3 * true_scale);
-  const FrameCamera& a = r.cameras[0];
-  const FrameCamera& b = r.cameras[3];
+  const NamedCamera& a = r.cameras[0];
+  const NamedCamera& b = r.cameras[3];
   for (auto [u, v] : {std::pair{20.0, 15.0}, {40.0, 30.0}, {55.0, 40.0}}) {
     double za = true_scale * scene.depth(scene.cameras[0], u, v);  // network depth at (u, v)
     Eigen::Vector3d xw = scene.backproject(a, u, v, za);           // network units

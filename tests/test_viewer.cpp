@@ -50,7 +50,7 @@ void write_run(const fs::path& out, int n, bool with_frames = true) {
     r.names.push_back(name);
     r.depths.push_back(cv::Mat(24, 32, CV_32F, cv::Scalar(2.0f + 0.1f * k)));
     r.frames_bgr.push_back(cv::Mat(24, 32, CV_8UC3, cv::Scalar(10, 20, 30 + k)));
-    FrameCamera c;
+    NamedCamera c;
     c.name = name;
     c.pose.t = Eigen::Vector3d(k, 0, 0);
     c.intrinsics = {30, 30, 16, 12, 32, 24};

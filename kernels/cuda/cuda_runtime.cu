@@ -89,7 +89,7 @@ class CachingCudaAllocator final : public Allocator {
     free_[size].push_back(p);
     cached_bytes_ += size;
   }
-  Device device() const override { return Device::cuda(0); }
+  DeviceId device() const override { return DeviceId::cuda(0); }
 
  private:
   static size_t round_size(size_t n) {
@@ -141,7 +141,7 @@ std::string runtime_status() { return cuda_state().status; }
 
 // Copies through the engine stream and waits for it, so the result is complete on return (host
 // memory is pageable; the copy is synchronous with respect to the host either way).
-Tensor copy_between_devices(const Tensor& x, Device d) {
+Tensor copy_between_devices(const Tensor& x, DeviceId d) {
   CVD_CHECK(x.is_contiguous(), "device_copy needs a contiguous tensor, got {}", x.str());
   if (d.is_cuda() || x.device().is_cuda()) require_gpu("copying a tensor to or from CUDA");
   Tensor y = Tensor::empty(x.shape(), x.dtype(), d);

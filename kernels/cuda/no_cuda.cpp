@@ -13,7 +13,7 @@ int no_devices() { return 0; }
 
 std::string not_compiled() { return "not compiled in (no nvcc at build time)"; }
 
-Tensor refuse_copy(const Tensor& x, Device d) {
+Tensor refuse_copy(const Tensor& x, DeviceId d) {
   fail(ErrorCategory::unsupported, "cannot copy {} to {}: this build has no CUDA backend", x.str(),
        d.str());
 }

@@ -5,7 +5,7 @@
 #include <optional>
 #include <string>
 
-#include "pipeline/flow/flow_estimator.h"
+#include "pipeline/flow/optical_flow.h"
 
 namespace cvd {
 
@@ -30,7 +30,7 @@ struct DisFlowOptions {
   std::optional<int> finest_scale;                    // 0 = full resolution
 };
 
-class DisFlowEstimator final : public FlowEstimator {
+class DisFlowEstimator final : public OpticalFlow {
  public:
   explicit DisFlowEstimator(const DisFlowOptions& options = {});
   cv::Mat estimate(const cv::Mat& a_bgr, const cv::Mat& b_bgr) override;

@@ -1,4 +1,4 @@
-// FlowNet2 optical flow (models/flownet2.h) behind the FlowEstimator interface: the images are
+// FlowNet2 optical flow (models/flownet2.h) behind the OpticalFlow interface: the images are
 // resized to the nearest multiples of 64 (at least 64), run through the network on the CPU in
 // f32, and the flow is resized back to the input size with its components rescaled.
 #pragma once
@@ -7,11 +7,11 @@
 #include <string>
 
 #include "models/flownet2.h"
-#include "pipeline/flow/flow_estimator.h"
+#include "pipeline/flow/optical_flow.h"
 
 namespace cvd {
 
-class FlowNet2Estimator final : public FlowEstimator {
+class FlowNet2Estimator final : public OpticalFlow {
  public:
   // Loads a .cvdw of FlowNet2 weights under the upstream state_dict names
   // ("flownetc.conv1.0.weight", ...); the header's config "width" (default 1) gives the width.

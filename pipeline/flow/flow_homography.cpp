@@ -187,8 +187,8 @@ cv::Mat homography_flow(const cv::Matx33d& a_to_b, cv::Size size) {
   return compose_homography_flow(cv::Mat::zeros(size, CV_32FC2), a_to_b);
 }
 
-cv::Mat flow_through_homography(FlowEstimator& estimator, const cv::Mat& a_bgr,
-                                const cv::Mat& b_bgr, const cv::Matx33d& a_to_b) {
+cv::Mat flow_through_homography(OpticalFlow& estimator, const cv::Mat& a_bgr, const cv::Mat& b_bgr,
+                                const cv::Matx33d& a_to_b) {
   CVD_CHECK(a_bgr.size() == b_bgr.size(), "homography pre-warp: image sizes differ");
   if (a_to_b == cv::Matx33d::eye()) return estimator.estimate(a_bgr, b_bgr);
   cv::Mat b_aligned;

@@ -17,7 +17,7 @@
 #include <string>
 #include <vector>
 
-#include "pipeline/flow/flow_estimator.h"
+#include "pipeline/flow/optical_flow.h"
 
 namespace cvd {
 
@@ -79,14 +79,14 @@ cv::Mat homography_flow(const cv::Matx33d& a_to_b, cv::Size size);
 
 // Warps b into a's frame with G (b~(x) = b(G x)), runs `estimator` on (a, b~) and composes the
 // flow back. With G exactly the identity it runs the estimator on (a, b) directly.
-cv::Mat flow_through_homography(FlowEstimator& estimator, const cv::Mat& a_bgr,
-                                const cv::Mat& b_bgr, const cv::Matx33d& a_to_b);
+cv::Mat flow_through_homography(OpticalFlow& estimator, const cv::Mat& a_bgr, const cv::Mat& b_bgr,
+                                const cv::Matx33d& a_to_b);
 
-// A FlowEstimator that adds the homography pre-warp around another one (not owned; it must
+// An OpticalFlow that adds the homography pre-warp around another one (not owned; it must
 // outlive this object).
-class HomographyPrewarpedFlow final : public FlowEstimator {
+class HomographyPrewarpedFlow final : public OpticalFlow {
  public:
-  HomographyPrewarpedFlow(FlowEstimator& inner, const HomographyOptions& options = {})
+  HomographyPrewarpedFlow(OpticalFlow& inner, const HomographyOptions& options = {})
       : inner_(inner), options_(options) {}
   cv::Mat estimate(const cv::Mat& a_bgr, const cv::Mat& b_bgr) override;
   std::string name() const override { return inner_.name() + "+homography"; }
@@ -94,7 +94,7 @@ class HomographyPrewarpedFlow final : public FlowEstimator {
   const HomographyEstimate& last_homography() const { return last_; }
 
  private:
-  FlowEstimator& inner_;
+  OpticalFlow& inner_;
   HomographyOptions options_;
   HomographyEstimate last_;
 };

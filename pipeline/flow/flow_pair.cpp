@@ -6,9 +6,8 @@
 
 namespace cvd {
 
-FlowPairResult compute_pair_flow(FlowEstimator& estimator, const cv::Mat& img_i,
-                                 const cv::Mat& img_j, const FlowPairOptions& options,
-                                 const ImageKeypoints* keypoints_i,
+FlowPairResult compute_pair_flow(OpticalFlow& estimator, const cv::Mat& img_i, const cv::Mat& img_j,
+                                 const FlowPairOptions& options, const ImageKeypoints* keypoints_i,
                                  const ImageKeypoints* keypoints_j) {
   CVD_CHECK(!img_i.empty() && !img_j.empty(), "compute_pair_flow: an image is empty");
   CVD_CHECK(img_i.size() == img_j.size(), "compute_pair_flow: image sizes differ ({}x{} vs {}x{})",

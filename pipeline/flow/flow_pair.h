@@ -4,8 +4,8 @@
 #include <opencv2/core.hpp>
 
 #include "pipeline/flow/flow_consistency.h"
-#include "pipeline/flow/flow_estimator.h"
 #include "pipeline/flow/flow_homography.h"
+#include "pipeline/flow/optical_flow.h"
 
 namespace cvd {
 
@@ -37,8 +37,8 @@ struct FlowPairResult {
 // forward-backward masks of both. Keypoints detected beforehand (detect_keypoints with
 // options.homography) may be passed to avoid detecting them again for every pair a frame is in.
 // Throws Error(invalid_argument) for mismatched or empty images.
-FlowPairResult compute_pair_flow(FlowEstimator& estimator, const cv::Mat& img_i,
-                                 const cv::Mat& img_j, const FlowPairOptions& options = {},
+FlowPairResult compute_pair_flow(OpticalFlow& estimator, const cv::Mat& img_i, const cv::Mat& img_j,
+                                 const FlowPairOptions& options = {},
                                  const ImageKeypoints* keypoints_i = nullptr,
                                  const ImageKeypoints* keypoints_j = nullptr);
 

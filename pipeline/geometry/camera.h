@@ -44,7 +44,7 @@ struct Pose {
 
 // One frame's camera as known to the pipeline: its image name (the key every stage uses, never
 // its index), pose and intrinsics. `registered` is false when SfM could not place the frame.
-struct FrameCamera {
+struct NamedCamera {
   std::string name;
   Pose pose;
   Intrinsics intrinsics;

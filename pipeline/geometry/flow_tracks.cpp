@@ -37,20 +37,20 @@ bool sample_flow(const cv::Mat& flow, const cv::Mat& mask, double x, double y, c
 using Observation = PixelTrack::Observation;
 
 // Unit ray of pixel (x, y) of camera c, in world coordinates.
-Eigen::Vector3d world_ray(const FrameCamera& c, double x, double y) {
+Eigen::Vector3d world_ray(const NamedCamera& c, double x, double y) {
   const Intrinsics& K = c.intrinsics;
   return (c.pose.R * Eigen::Vector3d((x - K.cx) / K.fx, (y - K.cy) / K.fy, 1.0)).normalized();
 }
 
 // The point closest (least squares) to every ray of the track; false when the rays are too close
 // to parallel, or the point is behind a camera or reprojects too far in any frame.
-bool triangulate_track(const std::vector<FrameCamera>& cams, const std::vector<Observation>& obs,
+bool triangulate_track(const std::vector<NamedCamera>& cams, const std::vector<Observation>& obs,
                        const FlowTrackOptions& o, Eigen::Vector3d& X) {
   std::vector<Eigen::Vector3d> rays;
   Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
   Eigen::Vector3d b = Eigen::Vector3d::Zero();
   for (const Observation& ob : obs) {
-    const FrameCamera& c = cams[size_t(ob.frame)];
+    const NamedCamera& c = cams[size_t(ob.frame)];
     const Eigen::Vector3d d = world_ray(c, ob.x, ob.y);
     const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - d * d.transpose();
     A += P;
@@ -65,7 +65,7 @@ bool triangulate_track(const std::vector<FrameCamera>& cams, const std::vector<O
   if (!lu.isInvertible()) return false;
   X = lu.solve(b);
   for (const Observation& ob : obs) {
-    const FrameCamera& c = cams[size_t(ob.frame)];
+    const NamedCamera& c = cams[size_t(ob.frame)];
     const Eigen::Vector3d pc = c.pose.R.transpose() * (X - c.pose.t);
     if (pc.z() <= 0) return false;
     const Intrinsics& K = c.intrinsics;
@@ -117,7 +117,7 @@ std::vector<PixelTrack> follow_flow_tracks(const std::vector<cv::Mat>& next_flow
   return tracks;
 }
 
-FlowTrackStats triangulate_flow_tracks(const std::vector<FrameCamera>& cams,
+FlowTrackStats triangulate_flow_tracks(const std::vector<NamedCamera>& cams,
                                        const std::vector<cv::Mat>& next_flow,
                                        const std::vector<cv::Mat>& next_mask,
                                        std::vector<std::vector<Eigen::Vector3d>>& points,

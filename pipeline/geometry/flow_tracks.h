@@ -50,7 +50,7 @@ struct FlowTrackStats {
 // next_flow[k] / next_mask[k]: the flow from frame k to k + 1 (CV_32FC2, pixels at the cameras'
 // resolution) and its trusted pixels (CV_8U, non-zero = trusted); empty where that pair is
 // missing. Appends each kept point to points[k] for every frame k of its track.
-FlowTrackStats triangulate_flow_tracks(const std::vector<FrameCamera>& cams,
+FlowTrackStats triangulate_flow_tracks(const std::vector<NamedCamera>& cams,
                                        const std::vector<cv::Mat>& next_flow,
                                        const std::vector<cv::Mat>& next_mask,
                                        std::vector<std::vector<Eigen::Vector3d>>& points,

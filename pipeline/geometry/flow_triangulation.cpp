@@ -6,7 +6,7 @@
 
 namespace cvd {
 
-int triangulate_flow_points(const FrameCamera& ci, const FrameCamera& cj, int i, int j,
+int triangulate_flow_points(const NamedCamera& ci, const NamedCamera& cj, int i, int j,
                             const cv::Mat& flow, const cv::Mat& mask,
                             std::vector<std::vector<Eigen::Vector3d>>& points,
                             const FlowTriangulationOptions& o) {
@@ -36,7 +36,7 @@ int triangulate_flow_points(const FrameCamera& ci, const FrameCamera& cj, int i,
       if (a <= 0 || b <= 0) continue;
       Eigen::Vector3d X = 0.5 * ((ci.pose.t + a * di) + (cj.pose.t + b * dj));
       // Reprojection in both frames.
-      auto reproj = [&](const FrameCamera& c, double u, double v) {
+      auto reproj = [&](const NamedCamera& c, double u, double v) {
         Eigen::Vector3d pc = c.pose.R.transpose() * (X - c.pose.t);
         if (pc.z() <= 0) return 1e9;
         const Intrinsics& K = c.intrinsics;

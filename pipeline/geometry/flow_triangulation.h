@@ -19,7 +19,7 @@ struct FlowTriangulationOptions {
 
 // flow: CV_32FC2 from frame i to j at the cameras' intrinsics resolution; mask: CV_8U (non-zero
 // = trusted). Appends each kept point to points[i] and points[j] (world coordinates).
-int triangulate_flow_points(const FrameCamera& ci, const FrameCamera& cj, int i, int j,
+int triangulate_flow_points(const NamedCamera& ci, const NamedCamera& cj, int i, int j,
                             const cv::Mat& flow, const cv::Mat& mask,
                             std::vector<std::vector<Eigen::Vector3d>>& points,
                             const FlowTriangulationOptions& options = {});

@@ -42,7 +42,7 @@ int ScaleCalibrationResult::num_valid() const {
 }
 
 ScaleCalibrationResult calibrate_scale(
-    const std::vector<FrameCamera>& cameras, const std::vector<cv::Mat>& depths,
+    const std::vector<NamedCamera>& cameras, const std::vector<cv::Mat>& depths,
     const std::vector<std::vector<Eigen::Vector3d>>& observed_points,
     const ScaleCalibrationOptions& options) {
   const size_t n = cameras.size();
@@ -59,7 +59,7 @@ ScaleCalibrationResult calibrate_scale(
   double sum = 0;
   int valid = 0;
   for (size_t i = 0; i < n; ++i) {
-    const FrameCamera& cam = cameras[i];
+    const NamedCamera& cam = cameras[i];
     const cv::Mat& d = depths[i];
     if (!cam.registered || d.empty()) continue;
     CVD_CHECK(d.channels() == 1 && (d.depth() == CV_32F || d.depth() == CV_64F),
@@ -105,7 +105,7 @@ ScaleCalibrationResult calibrate_scale(
   return result;
 }
 
-ScaleCalibrationResult calibrate_scale(const std::vector<FrameCamera>& cameras,
+ScaleCalibrationResult calibrate_scale(const std::vector<NamedCamera>& cameras,
                                        const std::vector<cv::Mat>& depths, const ColmapModel& model,
                                        const ScaleCalibrationOptions& options) {
   std::vector<std::vector<Eigen::Vector3d>> points;

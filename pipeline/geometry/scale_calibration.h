@@ -33,7 +33,7 @@ struct ScaleCalibrationResult {
   std::vector<int> frame_sample_counts;  // valid samples behind each s_i
   std::vector<bool> frame_valid;
   double scale = 0.0;                // s, the mean of the valid s_i
-  std::vector<FrameCamera> cameras;  // the input cameras with t <- s * t
+  std::vector<NamedCamera> cameras;  // the input cameras with t <- s * t
   int num_valid() const;
 };
 
@@ -42,12 +42,12 @@ struct ScaleCalibrationResult {
 // observed_points: world coordinates (SfM units) of the sparse points frame i observes.
 // Unregistered cameras are invalid frames. Throws Error(numerical) when no frame is valid.
 ScaleCalibrationResult calibrate_scale(
-    const std::vector<FrameCamera>& cameras, const std::vector<cv::Mat>& depths,
+    const std::vector<NamedCamera>& cameras, const std::vector<cv::Mat>& depths,
     const std::vector<std::vector<Eigen::Vector3d>>& observed_points,
     const ScaleCalibrationOptions& options = {});
 
 // Same, with the points each frame observes taken from a COLMAP model by the camera's NAME.
-ScaleCalibrationResult calibrate_scale(const std::vector<FrameCamera>& cameras,
+ScaleCalibrationResult calibrate_scale(const std::vector<NamedCamera>& cameras,
                                        const std::vector<cv::Mat>& depths, const ColmapModel& model,
                                        const ScaleCalibrationOptions& options = {});
 

@@ -252,8 +252,8 @@ const ColmapImage* ColmapModel::find_image(const std::string& name) const {
   return it == images.end() ? nullptr : &it->second;
 }
 
-FrameCamera ColmapModel::frame_camera(const std::string& name) const {
-  FrameCamera fc;
+NamedCamera ColmapModel::frame_camera(const std::string& name) const {
+  NamedCamera fc;
   fc.name = name;
   const ColmapImage* img = find_image(name);
   if (!img) {
@@ -445,7 +445,7 @@ void write_colmap_text_model(const std::filesystem::path& directory, const Colma
   write_text_file(directory / "points3D.txt", pts);
 }
 
-ColmapModel colmap_model_from_frames(const std::vector<FrameCamera>& frames) {
+ColmapModel colmap_model_from_frames(const std::vector<NamedCamera>& frames) {
   ColmapModel model;
   int next_image_id = 1;
   for (const auto& f : frames) {

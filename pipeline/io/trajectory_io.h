@@ -90,7 +90,7 @@ struct ColmapModel {
   const ColmapImage* find_image(const std::string& name) const;
   // The camera of image `name` as the pipeline sees it; registered = false (identity pose,
   // empty intrinsics) when the model has no image of that name.
-  FrameCamera frame_camera(const std::string& name) const;
+  NamedCamera frame_camera(const std::string& name) const;
   // World coordinates of the triangulated points image `name` observes (empty when unknown).
   std::vector<Eigen::Vector3d> observed_points(const std::string& name) const;
 };
@@ -102,7 +102,7 @@ ColmapModel read_colmap_text_model(const std::filesystem::path& directory);
 void write_colmap_text_model(const std::filesystem::path& directory, const ColmapModel& model);
 // A model with one PINHOLE camera per distinct intrinsics and one image per registered frame
 // (no points, no observations): the form in which the pipeline exports its poses.
-ColmapModel colmap_model_from_frames(const std::vector<FrameCamera>& frames);
+ColmapModel colmap_model_from_frames(const std::vector<NamedCamera>& frames);
 
 // ---- Intrinsics JSON ----------------------------------------------------------------------------
 // Throws Error(invalid_argument) naming `source` when the intrinsics are not plausible: fx, fy,

@@ -17,7 +17,7 @@ namespace cvd {
 namespace fs = std::filesystem;
 
 ColmapModel triangulate_known_poses(const std::vector<ColmapFrame>& frames,
-                                    const std::vector<FrameCamera>& cameras,
+                                    const std::vector<NamedCamera>& cameras,
                                     const fs::path& work_dir, const ColmapOptions& options,
                                     ColmapResult& result) {
   const auto t_start = colmap::Clock::now();

@@ -18,7 +18,7 @@ namespace cvd {
 // names, with `result` filled as run_colmap does (log, step times, keyframes). Throws
 // Error(unsupported) without a colmap binary, Error(external) when COLMAP fails.
 ColmapModel triangulate_known_poses(const std::vector<ColmapFrame>& frames,
-                                    const std::vector<FrameCamera>& cameras,
+                                    const std::vector<NamedCamera>& cameras,
                                     const std::filesystem::path& work_dir,
                                     const ColmapOptions& options, ColmapResult& result);
 

@@ -300,7 +300,7 @@ void finish_result(const std::vector<ColmapFrame>& frames, const FrameSet& set,
 
   result.model = to_frame_space(best.model, user_name, width, height);
   for (const auto& f : frames) {
-    FrameCamera c = result.model.frame_camera(f.name);
+    NamedCamera c = result.model.frame_camera(f.name);
     if (!c.registered) result.unregistered.push_back(f.name);
     result.cameras.push_back(c);
   }

@@ -90,7 +90,7 @@ struct ColmapOptions {
 struct ColmapResult {
   // One per input frame, in input order, keyed by name; registered = false for frames COLMAP did
   // not place (their pose is the identity and must not be used).
-  std::vector<FrameCamera> cameras;
+  std::vector<NamedCamera> cameras;
   ColmapModel model;                      // the chosen model, in the frames' resolution, by name
   std::vector<std::string> unregistered;  // names of frames missing from the chosen model
   int num_models = 0;                     // models COLMAP built in the successful attempt

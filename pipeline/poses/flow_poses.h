@@ -55,7 +55,7 @@ struct FlowPoseCandidate {
 };
 
 struct FlowPoseResult {
-  std::vector<FrameCamera> cameras;       // one per frame, by name, at the frames' resolution
+  std::vector<NamedCamera> cameras;       // one per frame, by name, at the frames' resolution
   ColmapModel model;                      // the same cameras, and points with observations
   std::vector<std::string> unregistered;  // frames left without a pose
   std::vector<std::string> warnings;

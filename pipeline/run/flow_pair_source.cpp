@@ -9,7 +9,7 @@ namespace cvd {
 
 namespace {
 
-PairDirection make_direction(const FrameCamera& a, const FrameCamera& b, const cv::Mat& flow,
+PairDirection make_direction(const NamedCamera& a, const NamedCamera& b, const cv::Mat& flow,
                              const cv::Mat& mask) {
   PairDirection d;
   d.pose_i = a.pose;
@@ -34,7 +34,7 @@ PairDirection make_direction(const FrameCamera& a, const FrameCamera& b, const c
 
 }  // namespace
 
-FlowPairSource::FlowPairSource(const FlowStage& flow, std::vector<FrameCamera> cameras,
+FlowPairSource::FlowPairSource(const FlowStage& flow, std::vector<NamedCamera> cameras,
                                std::vector<cv::Mat> usable)
     : flow_(flow), cameras_(std::move(cameras)), usable_(std::move(usable)) {}
 

@@ -15,7 +15,7 @@ namespace cvd {
 class FlowPairSource final : public PairSource {
  public:
   // `usable`: per frame, the user masks at the depth resolution (0 = ignore), or empty.
-  FlowPairSource(const FlowStage& flow, std::vector<FrameCamera> cameras,
+  FlowPairSource(const FlowStage& flow, std::vector<NamedCamera> cameras,
                  std::vector<cv::Mat> usable);
   size_t size() const override { return flow_.pairs.size(); }
   TrainingPair load(size_t k) const override;
@@ -25,7 +25,7 @@ class FlowPairSource final : public PairSource {
 
  private:
   const FlowStage& flow_;
-  std::vector<FrameCamera> cameras_;
+  std::vector<NamedCamera> cameras_;
   std::vector<cv::Mat> usable_;
 };
 

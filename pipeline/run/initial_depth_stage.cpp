@@ -19,7 +19,7 @@ namespace {
 
 using json = nlohmann::json;
 
-SparseDepth project_points(const FrameCamera& c, const std::vector<Eigen::Vector3d>& pts) {
+SparseDepth project_points(const NamedCamera& c, const std::vector<Eigen::Vector3d>& pts) {
   SparseDepth s;
   const Intrinsics& K = c.intrinsics;
   for (const auto& X : pts) {
@@ -120,7 +120,7 @@ json start_network(const RunOptions& o, DepthNet& net, const std::function<Tenso
 InitialDepthStage run_initial_depth_stage(const RunOptions& o, DepthNet& net,
                                           const std::function<Tensor(int)>& load_frame,
                                           const SparsePointsStage& points,
-                                          std::vector<FrameCamera>& cams, cv::Size depth_size) {
+                                          std::vector<NamedCamera>& cams, cv::Size depth_size) {
   const int n = static_cast<int>(cams.size());
   InitialDepthStage st;
   st.sparse.resize(static_cast<size_t>(n));

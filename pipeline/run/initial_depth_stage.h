@@ -28,6 +28,6 @@ struct InitialDepthStage {
 InitialDepthStage run_initial_depth_stage(const RunOptions& o, DepthNet& net,
                                           const std::function<Tensor(int)>& load_frame,
                                           const SparsePointsStage& points,
-                                          std::vector<FrameCamera>& cams, cv::Size depth_size);
+                                          std::vector<NamedCamera>& cams, cv::Size depth_size);
 
 }  // namespace cvd

@@ -17,7 +17,7 @@ using json = nlohmann::json;
 
 namespace {
 
-uint32_t cameras_crc(const std::vector<FrameCamera>& cams, const Intrinsics& K) {
+uint32_t cameras_crc(const std::vector<NamedCamera>& cams, const Intrinsics& K) {
   uLong crc = crc32(0L, Z_NULL, 0);
   auto add = [&](const double* v, size_t count) {
     crc = crc32(crc, reinterpret_cast<const Bytef*>(v), static_cast<uInt>(count * sizeof(double)));

@@ -104,7 +104,7 @@ struct RunOptions {
 
 struct RunResult {
   std::vector<std::string> frame_names;
-  std::vector<FrameCamera> cameras;  // poses in the output depth units
+  std::vector<NamedCamera> cameras;  // poses in the output depth units
   std::vector<cv::Mat> depths;       // CV_32F per frame, at the depth resolution
   Intrinsics depth_intrinsics;
   int num_pairs = 0, num_pairs_dropped = 0;

@@ -104,7 +104,7 @@ void write_depth_maps(const fs::path& out, const RunOutputs& r,
 
 void write_cameras(const fs::path& out, const RunOutputs& r) {
   std::vector<TimedPose> traj;
-  std::vector<FrameCamera> reg;
+  std::vector<NamedCamera> reg;
   for (size_t k = 0; k < r.cameras.size(); ++k) {
     if (!r.cameras[k].registered) continue;
     traj.push_back({static_cast<double>(k) / r.fps, r.cameras[k].pose});
@@ -121,7 +121,7 @@ std::vector<FusedPoint> fuse_point_cloud(const RunOutputs& r, int pixel_step, in
             pixel_step, frame_step);
   std::vector<FusedPoint> points;
   for (size_t k = 0; k < r.names.size(); k += frame_step) {
-    const FrameCamera& c = r.cameras[k];
+    const NamedCamera& c = r.cameras[k];
     if (!c.registered) continue;
     const cv::Mat& d = r.depths[k];
     const Intrinsics& K = c.intrinsics;

@@ -25,7 +25,7 @@ struct RunOutputs {
   std::vector<std::string> names;
   std::vector<cv::Mat> depths;       // CV_32F
   std::vector<cv::Mat> frames_bgr;   // at the depth resolution (for colours and videos)
-  std::vector<FrameCamera> cameras;  // at the depth resolution
+  std::vector<NamedCamera> cameras;  // at the depth resolution
   double fps = 30;
 };
 

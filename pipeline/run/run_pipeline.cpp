@@ -161,7 +161,7 @@ RunResult run_pipeline(const RunOptions& o) {
   t = Clock::now();
   PosesStage poses = rank0_first([&] { return run_poses_stage(o, frames, cache); });
   timings["poses"] = since(t);
-  std::vector<FrameCamera> cams = poses.cameras;
+  std::vector<NamedCamera> cams = poses.cameras;
   for (auto& c : cams) c.intrinsics = c.intrinsics.scaled_to(dsize.width, dsize.height);
 
   // 4. Flow on sampled pairs (streamed: left in the cache and read per training batch)

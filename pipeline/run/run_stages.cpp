@@ -193,10 +193,10 @@ std::optional<Intrinsics> metadata_intrinsics(const RunOptions& o, const FramesS
   return k;
 }
 
-std::vector<FrameCamera> cameras_from_file(const RunOptions& o, const FramesStage& f,
+std::vector<NamedCamera> cameras_from_file(const RunOptions& o, const FramesStage& f,
                                            const Intrinsics& K) {
   std::vector<Pose> poses;
-  std::vector<FrameCamera> cams(f.names.size());
+  std::vector<NamedCamera> cams(f.names.size());
   const std::string& fmt_name = o.poses_format;
   if (fmt_name == "tum" || fmt_name == "kitti") {
     if (fmt_name == "tum") {
@@ -421,7 +421,7 @@ FlowStage run_flow_stage(const RunOptions& o, const FramesStage& f, const PosesS
   std::vector<FramePair> pairs;
   for (const FramePair& p : hierarchical_pairs(static_cast<int>(reg.size())))
     pairs.push_back({reg[p.first], reg[p.second]});
-  std::unique_ptr<FlowEstimator> estimator;
+  std::unique_ptr<OpticalFlow> estimator;
   if (o.flow == "flownet2") {
     CVD_CHECK(!o.flow_model.empty(),
               "--flow flownet2 needs --flow-model FILE.cvdw (no pretrained weights ship; see cvd "
@@ -433,7 +433,7 @@ FlowStage run_flow_stage(const RunOptions& o, const FramesStage& f, const PosesS
     dopt.preset = parse_dis_preset(o.dis_preset);
     estimator = std::make_unique<DisFlowEstimator>(dopt);
   }
-  FlowEstimator& dis = *estimator;
+  OpticalFlow& dis = *estimator;
   FlowPairOptions popt;
   popt.fb_threshold_px = o.fb_threshold_px;
   json key = {{"method", dis.name()},

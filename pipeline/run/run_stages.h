@@ -28,7 +28,7 @@ struct FramesStage {
 FramesStage run_frames_stage(const RunOptions& o, const std::filesystem::path& cache);
 
 struct PosesStage {
-  std::vector<FrameCamera>
+  std::vector<NamedCamera>
       cameras;  // per frame, at the cached frames' resolution; !registered = no pose
   std::vector<std::vector<Eigen::Vector3d>>
       points;                     // SfM points each frame observes (may be empty)

@@ -9,7 +9,7 @@
 namespace cvd {
 
 SparsePointsStage run_sparse_points_stage(const PosesStage& poses, const FlowStage& flow,
-                                          const std::vector<FrameCamera>& cams,
+                                          const std::vector<NamedCamera>& cams,
                                           const std::vector<cv::Mat>& usable) {
   SparsePointsStage st;
   st.points = poses.points;

@@ -21,7 +21,7 @@ struct SparsePointsStage {
 
 // `cams` at the depth resolution; `usable` the user masks at that resolution (empty: none).
 SparsePointsStage run_sparse_points_stage(const PosesStage& poses, const FlowStage& flow,
-                                          const std::vector<FrameCamera>& cams,
+                                          const std::vector<NamedCamera>& cams,
                                           const std::vector<cv::Mat>& usable);
 
 }  // namespace cvd

@@ -18,7 +18,7 @@ namespace {
 using json = nlohmann::json;
 
 // Fingerprint of the cameras training sees (a rerun of COLMAP gives other poses).
-uint32_t cameras_crc32(const std::vector<FrameCamera>& cams) {
+uint32_t cameras_crc32(const std::vector<NamedCamera>& cams) {
   uLong crc = crc32(0L, Z_NULL, 0);
   for (const auto& c : cams) {
     double v[17] = {c.intrinsics.fx, c.intrinsics.fy, c.intrinsics.cx, c.intrinsics.cy,
@@ -30,7 +30,7 @@ uint32_t cameras_crc32(const std::vector<FrameCamera>& cams) {
 }
 
 std::unique_ptr<CameraRefinement> camera_refinement(const RunOptions& o,
-                                                    const std::vector<FrameCamera>& cams) {
+                                                    const std::vector<NamedCamera>& cams) {
   if (o.refine_poses == "none" && !o.refine_focal) return nullptr;
   std::vector<Pose> start;
   int fixed = -1;
@@ -51,7 +51,7 @@ TrainingStage run_training_stage(const RunOptions& o, DepthNet& net,
                                  const std::function<Tensor(int)>& load_frame,
                                  const FlowStage& flow, const std::vector<cv::Mat>& usable,
                                  const std::string& poses_source, ComputePrecision precision,
-                                 std::vector<FrameCamera>& cams, cv::Size depth_size,
+                                 std::vector<NamedCamera>& cams, cv::Size depth_size,
                                  const std::filesystem::path& cache) {
   TrainingStage st;
   // The pairs with the final cameras: streamed from the cache, or all loaded now.

@@ -36,7 +36,7 @@ TrainingStage run_training_stage(const RunOptions& o, DepthNet& net,
                                  const std::function<Tensor(int)>& load_frame,
                                  const FlowStage& flow, const std::vector<cv::Mat>& usable,
                                  const std::string& poses_source, ComputePrecision precision,
-                                 std::vector<FrameCamera>& cams, cv::Size depth_size,
+                                 std::vector<NamedCamera>& cams, cv::Size depth_size,
                                  const std::filesystem::path& cache);
 
 }  // namespace cvd

@@ -60,12 +60,12 @@ void run_flow(const FlowArgs& a) {
     fail(ErrorCategory::invalid_argument, "image sizes differ: '{}' is {}x{} but '{}' is {}x{}",
          a.image_a, img_a.cols, img_a.rows, a.image_b, img_b.cols, img_b.rows);
 
-  std::unique_ptr<FlowEstimator> estimator_ptr;
+  std::unique_ptr<OpticalFlow> estimator_ptr;
   if (a.method == "flownet2")
     estimator_ptr = std::make_unique<FlowNet2Estimator>(a.model);
   else
     estimator_ptr = std::make_unique<DisFlowEstimator>(dis);
-  FlowEstimator& estimator = *estimator_ptr;
+  OpticalFlow& estimator = *estimator_ptr;
   const auto t0 = std::chrono::steady_clock::now();
   const FlowPairResult r = compute_pair_flow(estimator, img_a, img_b, opt);
   const double seconds =

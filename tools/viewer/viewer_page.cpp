@@ -67,7 +67,7 @@ RunOutputs read_run(const fs::path& run_dir, ViewerSummary& summary) {
   RunOutputs r;
   for (const EvalFrame& f : seq.frames) {
     cv::Mat depth = load_eval_depth(f);
-    FrameCamera cam;
+    NamedCamera cam;
     cam.name = f.name;
     cam.pose = *f.pose;
     cam.intrinsics = seq.intrinsics->scaled_to(depth.cols, depth.rows);
@@ -99,7 +99,7 @@ nlohmann::json key_figures(const fs::path& run_dir, const RunOutputs& r, ViewerS
     rows.push_back({label, value});
   };
   size_t registered = 0;
-  for (const FrameCamera& c : r.cameras) registered += c.registered;
+  for (const NamedCamera& c : r.cameras) registered += c.registered;
   add("frames", fmt::format("{} ({} with a pose)", r.names.size(), registered));
   if (!r.depths.empty())
     add("depth maps", fmt::format("{} x {}", r.depths[0].cols, r.depths[0].rows));
@@ -199,7 +199,7 @@ nlohmann::json viewer_data(const fs::path& run_dir, const ViewerOptions& o,
   if (keep == 0) summary.warnings.push_back("no valid depth: the cloud is empty");
 
   nlohmann::json cameras = nlohmann::json::array();
-  for (const FrameCamera& c : r.cameras) {
+  for (const NamedCamera& c : r.cameras) {
     if (!c.registered) {
       cameras.push_back(nullptr);
       continue;

@@ -6,9 +6,9 @@
 
 namespace cvd {
 
-class FlowEstimator {
+class OpticalFlow {
  public:
-  virtual ~FlowEstimator() = default;
+  virtual ~OpticalFlow() = default;
 
   // Dense flow from image a to image b, in pixels, as CV_32FC2 (u, v) of a's size: pixel (x, y)
   // of a is seen at (x + u, y + v) in b. Both images are 8-bit BGR (CV_8UC3) of the same size.

@@ -3,7 +3,7 @@
 # suite with ctest, then checks the installed package with the example consumer. Then (issue 8):
 #  * the suite built with ASan + UBSan + LeakSanitizer (-O1) in <build-dir>-asan, every test
 #    executable but those labelled "slow" (they ran in the Release build above); a sanitizer
-#    report fails the test. About 14 min of build and 4 min of tests on 2 cores;
+#    report fails the test. About 11 min of build and 5 min of tests on 2 cores;
 #    CVD_SANITIZE_TESTS=0 skips it;
 #  * short libFuzzer runs of every reader (tests/fuzz/run_fuzzers.sh, clang) in <build-dir>-fuzz,
 #    CVD_FUZZ_SECONDS per target (default 10; 0 skips; tests/fuzz/run_fuzzers.sh runs longer).

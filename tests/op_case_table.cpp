@@ -67,8 +67,8 @@ OpCase bn_case(const std::string& name, bool training, bool affine) {
   }
   return {name, in, [training, affine](const In& t) {
             // Fresh running statistics per call, so finite differences see the same state.
-            Tensor rm = Tensor::full({4}, 0.1, t[0].dtype());
-            Tensor rv = Tensor::full({4}, 1.5, t[0].dtype());
+            Tensor rm = Tensor::full({4}, 0.1, t[0].dtype(), t[0].device());
+            Tensor rv = Tensor::full({4}, 1.5, t[0].dtype(), t[0].device());
             BatchNormParams p{training, 0.1, 1e-5};
             return batch_norm(t[0], rm, rv, affine ? t[1] : Tensor(), affine ? t[2] : Tensor(), p);
           }};

@@ -60,11 +60,13 @@ TrainingPair FlowPairSource::load(size_t k) const {
           make_direction(cameras_[size_t(j)], cameras_[size_t(i)], p.backward, p.backward_mask)};
 }
 
-bool stream_pairs(const std::string& mode, size_t estimated_pairs, cv::Size depth_size) {
+bool stream_pairs(const std::string& mode, size_t estimated_pairs, cv::Size depth_size,
+                  bool half_precision) {
   if (mode == "stream") return true;
   if (mode == "memory") return false;
   CVD_CHECK(mode == "auto", "pair storage must be auto, memory or stream, got '{}'", mode);
-  const double bytes = 2.0 * 12.0 * double(depth_size.area()) * double(estimated_pairs);
+  const double per_pixel = 2.0 * ((half_precision ? 4.0 : 8.0) + 1.0);  // flow + mask, 2 directions
+  const double bytes = per_pixel * double(depth_size.area()) * double(estimated_pairs);
   return bytes > double(1ull << 30);
 }
 

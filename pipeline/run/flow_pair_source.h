@@ -29,8 +29,10 @@ class FlowPairSource final : public PairSource {
   std::vector<cv::Mat> usable_;
 };
 
-// Whether the run streams its pairs: "stream", "memory", or "auto" (stream when the pairs would
-// take more than 1 GiB in memory: 2 directions x (8-byte flow + 4-byte mask) per depth pixel).
-bool stream_pairs(const std::string& mode, size_t estimated_pairs, cv::Size depth_size);
+// Whether the run streams its pairs: "stream", "memory", or "auto" (stream when the pairs' flows
+// would take more than 1 GiB in memory: 2 directions x (4-byte half-precision or 8-byte flow +
+// 1-byte mask) per depth pixel).
+bool stream_pairs(const std::string& mode, size_t estimated_pairs, cv::Size depth_size,
+                  bool half_precision);
 
 }  // namespace cvd

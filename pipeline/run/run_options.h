@@ -58,6 +58,9 @@ struct RunOptions {
   // Training pairs: "memory" (all loaded), "stream" (read from cache/flow per batch, prefetched;
   // memory independent of the number of pairs), "auto" (stream above 1 GiB of pairs).
   std::string pair_storage = "auto";
+  // How the flows of pairs held in memory are stored: "f16" (half precision, 10 bytes per depth
+  // pixel and pair with the masks) or "f32" (18 bytes); the cache files are f32 either way.
+  std::string pair_precision = "f16";
   std::filesystem::path masks;  // optional folder of masks (same names) passed to COLMAP
 
   // Flow

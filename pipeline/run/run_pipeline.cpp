@@ -166,7 +166,8 @@ RunResult run_pipeline(const RunOptions& o) {
 
   // 4. Flow on sampled pairs (streamed: left in the cache and read per training batch)
   t = Clock::now();
-  const bool stream = stream_pairs(o.pair_storage, hierarchical_pairs(n).size(), dsize);
+  const bool stream =
+      stream_pairs(o.pair_storage, hierarchical_pairs(n).size(), dsize, o.pair_precision == "f16");
   FlowStage flow = run_flow_stage(o, frames, poses, dsize, cache, stream);
   timings["flow"] = since(t);
   std::vector<cv::Mat> usable;
@@ -289,7 +290,8 @@ RunResult run_pipeline(const RunOptions& o) {
   }
   info["pairs"] = {{"kept", res.num_pairs},
                    {"dropped", flow.dropped},
-                   {"storage", tr.streamed ? "streamed from cache/flow" : "memory"}};
+                   {"storage", tr.streamed ? "streamed from cache/flow" : "memory"},
+                   {"flow_precision", o.pair_precision}};
   info["processes"] = {{"count", pg.size()}, {"group", pg.name()}};
   if (pg.size() > 1) info["processes"]["allreduce_bytes_per_step"] = tr.result.bytes_per_step;
   info["training"] = {{"epochs", o.epochs},

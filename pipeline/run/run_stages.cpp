@@ -397,14 +397,34 @@ void read_cached_flows(const fs::path& dir, const std::string& stem, FlowPairDat
   }
 }
 
+// A flow as the run holds it: CV_16FC2 when `half`, else as it is (CV_32FC2).
+cv::Mat held_flow(const cv::Mat& flow, bool half) {
+  if (!half || flow.empty() || flow.depth() == CV_16F) return flow;
+  cv::Mat h;
+  flow.convertTo(h, CV_16F);
+  return h;
+}
+
+// A held flow as training and triangulation read it: CV_32FC2.
+cv::Mat full_flow(const cv::Mat& flow) {
+  if (flow.empty() || flow.depth() == CV_32F) return flow;
+  cv::Mat f;
+  flow.convertTo(f, CV_32F);
+  return f;
+}
+
 }  // namespace
 
 FlowPairData FlowStage::load(size_t k) const {
   CVD_CHECK(k < pairs.size(), "flow pair {} of {}", k, pairs.size());
-  const FlowPairData& p = pairs[k];
-  if (!p.forward.empty()) return p;
-  FlowPairData d = p;
-  read_cached_flows(dir, p.stem, d);
+  FlowPairData d = pairs[k];
+  if (d.forward.empty()) {
+    read_cached_flows(dir, d.stem, d);
+    d.forward = held_flow(d.forward, half_precision);
+    d.backward = held_flow(d.backward, half_precision);
+  }
+  d.forward = full_flow(d.forward);
+  d.backward = full_flow(d.backward);
   return d;
 }
 
@@ -497,6 +517,8 @@ FlowStage run_flow_stage(const RunOptions& o, const FramesStage& f, const PosesS
       write_text_file(meta, mj.dump());
       if (!keep_flows) d.forward = d.backward = d.forward_mask = d.backward_mask = cv::Mat();
     }
+    d.forward = held_flow(d.forward, o.pair_precision == "f16");
+    d.backward = held_flow(d.backward, o.pair_precision == "f16");
     report_stage_progress(o, "flow", ++done, static_cast<int>(pairs.size()), stem);
     return d;
   };
@@ -520,6 +542,7 @@ FlowStage run_flow_stage(const RunOptions& o, const FramesStage& f, const PosesS
   }
   st.dir = dir;
   st.streamed = stream;
+  st.half_precision = o.pair_precision == "f16";
   if (st.pairs.empty())
     fail(ErrorCategory::invalid_argument,
          "flow: no frame pair kept {:.0f}% consistent pixels in both directions ({} pairs tried); "

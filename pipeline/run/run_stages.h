@@ -46,7 +46,7 @@ ColmapOptions colmap_options(const RunOptions& o, const std::optional<Intrinsics
 struct FlowPairData {
   FramePair pair;
   std::string stem;                     // cache/flow/<stem>.fwd.flo, ...
-  cv::Mat forward, backward;            // CV_32FC2 at the depth resolution
+  cv::Mat forward, backward;            // CV_32FC2 at the depth resolution (held: see FlowStage)
   cv::Mat forward_mask, backward_mask;  // CV_8U (255 valid)
   double forward_valid = 0, backward_valid = 0;
   bool kept = false;  // both directions kept enough consistent pixels
@@ -57,9 +57,14 @@ struct FlowStage {
   std::vector<FlowPairData> pairs;
   std::filesystem::path dir;  // cache/flow
   bool streamed = false;
+  // Flows held in memory as CV_16FC2 (half precision: 4 bytes per pixel and direction instead
+  // of 8); load() gives them back as CV_32FC2, and rounds flows read from the cache the same way,
+  // so streamed and held pairs are the same numbers. False: CV_32FC2 throughout.
+  bool half_precision = true;
   int dropped = 0;
   double seconds = 0;
-  // Pair k with its flows (read from the cache when streamed). Safe to call from another thread.
+  // Pair k with its flows as CV_32FC2 (read from the cache when streamed). Safe to call from
+  // another thread.
   FlowPairData load(size_t k) const;
 };
 FlowStage run_flow_stage(const RunOptions& o, const FramesStage& frames, const PosesStage& poses,

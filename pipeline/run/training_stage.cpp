@@ -54,16 +54,9 @@ TrainingStage run_training_stage(const RunOptions& o, DepthNet& net,
                                  std::vector<NamedCamera>& cams, cv::Size depth_size,
                                  const std::filesystem::path& cache) {
   TrainingStage st;
-  // The pairs with the final cameras: streamed from the cache, or all loaded now.
-  const FlowPairSource pair_loader(flow, cams, usable);
-  std::unique_ptr<PairSource> in_memory;
-  if (!flow.streamed) {
-    std::vector<TrainingPair> all;
-    for (size_t k = 0; k < pair_loader.size(); ++k) all.push_back(pair_loader.load(k));
-    in_memory = std::make_unique<PairsInMemory>(std::move(all));
-  }
-  const PairSource& pairs =
-      flow.streamed ? static_cast<const PairSource&>(pair_loader) : *in_memory;
+  // The pairs with the final cameras, made per batch (on the prefetch thread) from the flows the
+  // flow stage holds (half precision by default) or reads from the cache when streamed.
+  const FlowPairSource pairs(flow, cams, usable);
   const DepthNetArchitecture& arch = depth_net_architecture(net.arch());
   TrainingOptions to;
   to.epochs = o.epochs;
@@ -83,6 +76,7 @@ TrainingStage run_training_stage(const RunOptions& o, DepthNet& net,
                        {"steps_per_epoch", to.steps_per_epoch},
                        {"seed", to.seed},
                        {"warmup_steps", o.warmup_steps},
+                       {"pair_precision", o.pair_precision},
                        {"masks", o.masks.string()},
                        {"poses", poses_source},
                        {"flow", o.flow},

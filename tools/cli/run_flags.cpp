@@ -89,6 +89,9 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s, bool grou
                 "Training pairs: all in memory, streamed from OUT/cache/flow per batch (memory "
                 "independent of the number of pairs; prefetched), or auto (stream above 1 GiB)")
       ->check(CLI::IsMember({"auto", "memory", "stream"}));
+  c->add_option("--pair-precision", o.pair_precision,
+                "Flows of the pairs held in memory: f16 (half precision, the default) or f32")
+      ->check(CLI::IsMember({"f16", "f32"}));
   c->add_option("--colmap-features", o.colmap_max_features,
                 "Max SIFT features per frame for COLMAP");
   c->add_option("--masks", o.masks,

@@ -18,6 +18,9 @@ timeout 150 $CS --tool memcheck ./test_cuda_ops > $OUT/memcheck.log 2>&1; echo "
 grep -E "ERROR SUMMARY|Invalid|^\[  (PASSED|FAILED) " $OUT/memcheck.log | head -12
 echo "=== bench_cuda_ops (ours)"
 timeout 200 ./bench_cuda_ops --min-seconds 0.2 2>&1 | tee $OUT/bench_ours.jsonl
+echo "=== bench_op_table (the op table's perf mode, every backend)"
+OMP_NUM_THREADS=8 timeout 120 ./bench_op_table --min-seconds 0.02 > $OUT/op_table_perf.jsonl 2>&1; echo "rc=$?"
+grep cuda_f32 $OUT/op_table_perf.jsonl | head -3
 echo "=== torch"
 PYTHONUNBUFFERED=1 timeout 150 python3 bench_cuda_ops_torch.py --min-seconds 0.2 2>&1 | tee $OUT/bench_torch.jsonl | tail -14
 python3 -c "import torch;print('torch',torch.__version__,'cudnn',torch.backends.cudnn.version())"

@@ -1,8 +1,9 @@
 #!/bin/bash
 # Packs what a GPU machine without this project's Debian packages needs to run the CUDA checks:
-# test_cuda_ops and bench_cuda_ops linked with --as-needed against the engine and kernel layers
-# only (no OpenCV / ffmpeg / Ceres), the shared libraries they load (oneDNN xz-compressed), the
-# PyTorch reference script and bench/cuda_device_check.sh. ~18 MiB.
+# test_cuda_ops, bench_cuda_ops and bench_op_table (the op table's perf mode) linked with
+# --as-needed against the engine and kernel layers only (no OpenCV / ffmpeg / Ceres), the shared
+# libraries they load (oneDNN xz-compressed), the PyTorch reference script and
+# bench/cuda_device_check.sh. ~22 MiB.
 #   scripts/cuda-device-bundle.sh BUILD_DIR OUT_DIR      (BUILD_DIR: a CUDA build, layers built)
 # Then on the GPU machine: bash OUT_DIR/cuda_device_check.sh  (results under $OUT).
 set -euo pipefail
@@ -13,7 +14,8 @@ src=$(cd "$(dirname "$0")/.." && pwd)
 grep -q "CVD_WITH_CUDA" "$build/build.ninja" || { echo "$build: not a CUDA build" >&2; exit 1; }
 rm -rf "$out" && mkdir -p "$out/obj"
 flags="-O2 -DNDEBUG -std=gnu++17 -fopenmp -I$src -I$src/include -DCVD_WITH_CUDA=1 -I/usr/local/cuda/include"
-for s in tests/gtest_main tests/op_case_table tests/test_cuda_ops bench/bench_cuda_ops; do
+for s in tests/gtest_main tests/op_case_table tests/op_case_run tests/test_cuda_ops \
+  bench/bench_cuda_ops bench/bench_op_table; do
   g++ $flags -c "$src/$s.cpp" -o "$out/obj/$(basename $s).o"
 done
 libs=("$build"/kernels/libcvd_kernels.a "$build"/kernels/libcvd_kernels_reference.a
@@ -21,9 +23,11 @@ libs=("$build"/kernels/libcvd_kernels.a "$build"/kernels/libcvd_kernels_referenc
       "$build"/engine/libcvd_engine.a -ldnnl -fopenmp /usr/local/cuda/lib/libcudart.so -ldl -lz
       -lspdlog -lfmt -lpthread '-Wl,-rpath,$ORIGIN')
 o=$out/obj
-g++ -o "$out/test_cuda_ops" $o/gtest_main.o $o/op_case_table.o $o/test_cuda_ops.o -Wl,--as-needed \
-  -lgtest "${libs[@]}"
+g++ -o "$out/test_cuda_ops" $o/gtest_main.o $o/op_case_table.o $o/op_case_run.o \
+  $o/test_cuda_ops.o -Wl,--as-needed -lgtest "${libs[@]}"
 g++ -o "$out/bench_cuda_ops" $o/bench_cuda_ops.o -Wl,--as-needed "${libs[@]}"
+g++ -o "$out/bench_op_table" $o/bench_op_table.o $o/op_case_table.o $o/op_case_run.o \
+  -Wl,--as-needed "${libs[@]}"
 rm -rf "$o"
 for l in libdnnl.so.2 libfmt.so.9 libgomp.so.1 libOpenCL.so.1 libstdc++.so.6 libz.so.1; do
   cp -L "/lib/x86_64-linux-gnu/$l" "$out/"

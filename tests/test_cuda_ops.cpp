@@ -1,7 +1,7 @@
 // The CUDA backend on a real device, and its registration everywhere:
 //  - CudaOpTable: every case of the op table (tests/op_case_table.cpp) with f32 inputs on the
-//    CUDA device, forward and autograd backward, against the float64 reference on the CPU
-//    (same tolerances as tests/test_ops.cpp: f32_tol * max(1, |ref|max), 4x for gradients).
+//    CUDA device, forward and autograd backward, against the float64 reference on the CPU, by
+//    the same comparison as the CPU's (tests/op_case_run.h).
 //    Skipped, with the runtime's reason, when no GPU is usable.
 //  - CudaCoverage: in a CUDA build every op with a CPU f32 kernel has a CUDA f32 kernel; without
 //    a GPU, asking for CUDA memory is a clear Error while CPU work continues.
@@ -14,34 +14,10 @@
 #include "engine/backend_info.h"
 #include "engine/dispatch.h"
 #include "engine/random.h"
-#include "tests/op_case_table.h"
+#include "tests/op_case_run.h"
 
 namespace cvd::test {
 namespace {
-
-Tensor make_input(const InputSpec& s, Generator& g) {
-  std::vector<double> v(shape_numel(s.shape));
-  for (auto& x : v) {
-    switch (s.init) {
-      case Init::normal:
-        x = g.normal();
-        break;
-      case Init::positive:
-        x = 0.5 + 1.5 * g.uniform();
-        break;
-      case Init::away_from_zero:
-        x = (0.2 + g.uniform()) * (g.uniform() < 0.5 ? -1 : 1);
-        break;
-      case Init::grid:
-        x = -1.1 + 2.2 * g.uniform();
-        break;
-      case Init::mask:
-        x = g.uniform() < 0.5 ? 0.0 : 1.0;
-        break;
-    }
-  }
-  return Tensor::from_vector(v, s.shape, DType::f64);
-}
 
 double max_abs(const std::vector<double>& v) {
   double m = 0;
@@ -53,46 +29,7 @@ class CudaOpTable : public ::testing::TestWithParam<OpCase> {};
 
 TEST_P(CudaOpTable, F32OnCudaVsReference) {
   if (cuda_device_count() == 0) GTEST_SKIP() << "no CUDA device: " << cuda_runtime_status();
-  const OpCase& c = GetParam();
-  Generator g(99);
-  std::vector<Tensor> in64, in_cuda;
-  for (const auto& s : c.inputs) {
-    Tensor t = make_input(s, g);
-    Tensor u = t.to(DType::f32).to(DeviceId::cuda());
-    if (s.differentiable) {
-      t.requires_grad_(true);
-      u.requires_grad_(true);
-    }
-    in64.push_back(t);
-    in_cuda.push_back(u);
-  }
-  Tensor out64 = c.fn(in64);
-  Tensor out_cuda = c.fn(in_cuda);
-  ASSERT_EQ(out_cuda.dtype(), DType::f32);
-  ASSERT_TRUE(out_cuda.device().is_cuda()) << c.name << " produced " << out_cuda.str();
-  ASSERT_EQ(out_cuda.shape(), out64.shape());
-  const std::vector<double> r = out64.to_vector(), f = out_cuda.to_vector();
-  const double scale = std::max(1.0, max_abs(r));
-  for (size_t k = 0; k < r.size(); ++k)
-    ASSERT_NEAR(f[k], r[k], c.f32_tol * scale) << c.name << ": output element " << k;
-
-  const Tensor weights = Tensor::randn(out64.shape(), g, DType::f64);
-  std::vector<Tensor> d64, d_cuda;
-  for (size_t i = 0; i < in64.size(); ++i)
-    if (in64[i].requires_grad()) {
-      d64.push_back(in64[i]);
-      d_cuda.push_back(in_cuda[i]);
-    }
-  const std::vector<Tensor> g64 = grad(sum(mul(out64, weights)), d64);
-  const std::vector<Tensor> g_cuda =
-      grad(sum(mul(out_cuda, weights.to(DType::f32).to(DeviceId::cuda()))), d_cuda);
-  for (size_t i = 0; i < g64.size(); ++i) {
-    const std::vector<double> a = g64[i].to_vector(), b = g_cuda[i].to_vector();
-    const double gs = std::max(1.0, max_abs(a));
-    for (size_t k = 0; k < a.size(); ++k)
-      ASSERT_NEAR(b[k], a[k], c.f32_tol * 4 * gs)
-          << c.name << ": gradient of input " << i << " element " << k;
-  }
+  EXPECT_EQ(compare_with_reference(GetParam(), DeviceId::cuda(), 99), "");
 }
 
 INSTANTIATE_TEST_SUITE_P(Ops, CudaOpTable, ::testing::ValuesIn(all_op_cases()),

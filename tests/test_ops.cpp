@@ -2,7 +2,7 @@
 //  - GradCheck: in float64, the autograd gradient of sum(op(x) * R) against central finite
 //    differences, for every differentiable input element;
 //  - F32VsReference: the fast f32 kernels (forward and backward) against the float64 reference
-//    kernels on the same inputs.
+//    kernels on the same inputs (tests/op_case_run.h; test_cuda_ops runs the same on CUDA).
 // Plus coverage: every op of the dispatch table has a reference kernel and a fast CPU kernel.
 #include <gtest/gtest.h>
 
@@ -12,34 +12,10 @@
 #include "engine/autograd.h"
 #include "engine/dispatch.h"
 #include "engine/random.h"
-#include "tests/op_case_table.h"
+#include "tests/op_case_run.h"
 
 namespace cvd::test {
 namespace {
-
-Tensor make_input(const InputSpec& s, Generator& g) {
-  std::vector<double> v(shape_numel(s.shape));
-  for (auto& x : v) {
-    switch (s.init) {
-      case Init::normal:
-        x = g.normal();
-        break;
-      case Init::positive:
-        x = 0.5 + 1.5 * g.uniform();
-        break;
-      case Init::away_from_zero:
-        x = (0.2 + g.uniform()) * (g.uniform() < 0.5 ? -1 : 1);
-        break;
-      case Init::grid:
-        x = -1.1 + 2.2 * g.uniform();
-        break;
-      case Init::mask:
-        x = g.uniform() < 0.5 ? 0.0 : 1.0;
-        break;
-    }
-  }
-  return Tensor::from_vector(v, s.shape, DType::f64);
-}
 
 struct Prepared {
   std::vector<Tensor> inputs;  // f64 leaves
@@ -47,13 +23,9 @@ struct Prepared {
 };
 
 Prepared prepare(const OpCase& c, uint64_t seed) {
-  Generator g(seed);
   Prepared p;
-  for (const auto& s : c.inputs) {
-    Tensor t = make_input(s, g);
-    if (s.differentiable) t.requires_grad_(true);
-    p.inputs.push_back(t);
-  }
+  p.inputs = make_case_inputs(c, seed);
+  Generator g(seed + 1);
   Tensor out;
   {
     NoGradGuard ng;
@@ -65,12 +37,6 @@ Prepared prepare(const OpCase& c, uint64_t seed) {
 
 Tensor weighted_loss(const OpCase& c, const std::vector<Tensor>& in, const Tensor& w) {
   return sum(mul(c.fn(in), w));
-}
-
-double max_abs(const std::vector<double>& v) {
-  double m = 0;
-  for (double x : v) m = std::max(m, std::abs(x));
-  return m;
 }
 
 class OpTable : public ::testing::TestWithParam<OpCase> {};
@@ -104,38 +70,7 @@ TEST_P(OpTable, GradCheck) {
 }
 
 TEST_P(OpTable, F32VsReference) {
-  const OpCase& c = GetParam();
-  Prepared p = prepare(c, 99);
-  std::vector<Tensor> in32;
-  for (auto& t : p.inputs) {
-    Tensor u = t.detach().to(DType::f32);
-    if (t.requires_grad()) u.requires_grad_(true);
-    in32.push_back(u);
-  }
-  Tensor out64 = c.fn(p.inputs);
-  Tensor out32 = c.fn(in32);
-  ASSERT_EQ(out32.dtype(), DType::f32);
-  ASSERT_EQ(out32.shape(), out64.shape());
-  std::vector<double> r = out64.to_vector(), f = out32.to_vector();
-  double scale = std::max(1.0, max_abs(r));
-  for (size_t k = 0; k < r.size(); ++k)
-    ASSERT_NEAR(f[k], r[k], c.f32_tol * scale) << c.name << ": output element " << k;
-
-  std::vector<Tensor> d64, d32;
-  for (size_t i = 0; i < p.inputs.size(); ++i)
-    if (p.inputs[i].requires_grad()) {
-      d64.push_back(p.inputs[i]);
-      d32.push_back(in32[i]);
-    }
-  std::vector<Tensor> g64 = grad(sum(mul(out64, p.weights)), d64);
-  std::vector<Tensor> g32 = grad(sum(mul(out32, p.weights.to(DType::f32))), d32);
-  for (size_t i = 0; i < g64.size(); ++i) {
-    std::vector<double> a = g64[i].to_vector(), b = g32[i].to_vector();
-    double gs = std::max(1.0, max_abs(a));
-    for (size_t k = 0; k < a.size(); ++k)
-      ASSERT_NEAR(b[k], a[k], c.f32_tol * 4 * gs)
-          << c.name << ": gradient of input " << i << " element " << k;
-  }
+  EXPECT_EQ(compare_with_reference(GetParam(), DeviceId::cpu(), 99), "");
 }
 
 INSTANTIATE_TEST_SUITE_P(Ops, OpTable, ::testing::ValuesIn(all_op_cases()),

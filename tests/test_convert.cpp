@@ -3,6 +3,7 @@
 // (tiny-width PyTorch reference networks exported with BatchNorm kept, and PyTorch's own float64
 // outputs for the same weights).
 #include <gtest/gtest.h>
+#include <onnx/onnx_pb.h>
 
 #include <algorithm>
 #include <cmath>
@@ -264,6 +265,26 @@ TEST(Convert, ImpossibleTensorsAreRefusedNamingTheCause) {
     SCOPED_TRACE(name);
     expect_format_error(dir / (name + ".onnx"), needle);
   }
+}
+
+// A model that decodes and passes cvd's own checks but breaks ONNX's rules is refused by the ONNX
+// checker, naming the file: here a node reads a value nothing produces.
+TEST(Convert, TheOnnxCheckerRefusesAnInvalidGraph) {
+  REQUIRE_FIXTURE(f, "mannequin");
+  std::ifstream in(f->onnx, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NO_THROW(parse_onnx(bytes, f->onnx)) << "the fixture itself is valid";
+  onnx::ModelProto p;
+  ASSERT_TRUE(p.ParseFromString(bytes));
+  ASSERT_GT(p.graph().node_size(), 1);
+  onnx::NodeProto* node = p.mutable_graph()->mutable_node(1);
+  ASSERT_GT(node->input_size(), 0);
+  node->set_input(0, "a_value_nothing_produces");
+  std::string broken;
+  ASSERT_TRUE(p.SerializeToString(&broken));
+  test::TempDir dir;
+  std::ofstream(dir / "dangling.onnx", std::ios::binary) << broken;
+  expect_format_error(dir / "dangling.onnx", "the ONNX checker rejects it");
 }
 
 TEST(Convert, ExternalDataIsRefusedWithAFix) {

@@ -66,7 +66,7 @@ for t in "${TARGETS[@]}"; do
   extra=()
   case $t in
     cvdw) extra=(-fopenmp) ;;
-    onnx) extra=(-fopenmp -lonnx_proto -lprotobuf) ;;
+    onnx) extra=(-fopenmp -lonnx -lonnx_proto -lprotobuf) ;;
   esac
   "$CXX" "${FLAGS[@]}" -fsanitize=fuzzer "${objs[@]}" "${LIBS[@]}" "${extra[@]}" -o "$BUILD/fuzz_$t"
 done

@@ -1,5 +1,6 @@
 #include "tools/convert/onnx_graph.h"
 
+#include <onnx/checker.h>
 #include <onnx/onnx_pb.h>
 
 #include <climits>
@@ -294,6 +295,15 @@ OnnxModel parse_onnx(std::string_view bytes, const std::filesystem::path& source
   for (const auto& o : p.opset_import()) m.opset_imports.emplace_back(o.domain(), o.version());
   m.graph = read_graph(p.graph(), source);
   if (m.graph.nodes.empty()) corrupt(source, "the graph has no nodes");
+  // Then the ONNX checker (graph structure, node attributes and inputs against the op schemas),
+  // after the checks above, so that their messages (tensor sizes, external data) come first.
+  try {
+    onnx::checker::check_model(p);
+  } catch (const std::exception& e) {
+    std::string what = e.what();
+    if (const size_t nl = what.find('\n'); nl != std::string::npos) what.resize(nl);
+    corrupt(source, "the ONNX checker rejects it: " + what);
+  }
   return m;
 }
 

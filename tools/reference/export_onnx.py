@@ -137,7 +137,9 @@ def compact(model_proto):
 
 def unsupported_model():
     x = helper.make_tensor_value_info("x", TensorProto.FLOAT, [1, 2, 4, 4])
-    y = helper.make_tensor_value_info("y", TensorProto.FLOAT, None)
+    # LSTM's Y: [seq_length 1, num_directions 1, batch 2, hidden_size 2]; a declared shape keeps
+    # the model valid for onnx.checker, which cvd convert runs after its own checks.
+    y = helper.make_tensor_value_info("y", TensorProto.FLOAT, [1, 1, 2, 2])
     w = helper.make_tensor("conv.weight", TensorProto.FLOAT, [2, 2, 1, 1], [1.0, 0.0, 0.0, 1.0])
     nodes = [
         helper.make_node("Conv", ["x", "conv.weight"], ["a"]),

@@ -6,7 +6,7 @@
 #    report fails the test. About 11 min of build and 5 min of tests on 2 cores;
 #    CVD_SANITIZE_TESTS=0 skips it;
 #  * short libFuzzer runs of every reader (tests/fuzz/run_fuzzers.sh, clang) in <build-dir>-fuzz,
-#    CVD_FUZZ_SECONDS per target (default 10; 0 skips; tests/fuzz/run_fuzzers.sh runs longer).
+#    CVD_FUZZ_SECONDS per target (default 5; 0 skips; tests/fuzz/run_fuzzers.sh runs longer).
 # Usage: bash scripts/test.sh [build-dir]   (default: build)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -49,7 +49,7 @@ if [ "${CVD_SANITIZE_TESTS:-1}" = "1" ]; then
     ctest --test-dir "$build-asan" -j "$jobs" --timeout 3000
   echo "test.sh: sanitizer tests done after $(( $(date +%s) - start )) s"
 fi
-fuzz_seconds=${CVD_FUZZ_SECONDS:-10}
+fuzz_seconds=${CVD_FUZZ_SECONDS:-5}
 if [ "$fuzz_seconds" != "0" ]; then
   case $build in /*) fuzz_build=$build-fuzz ;; *) fuzz_build=$PWD/$build-fuzz ;; esac
   BUILD=$fuzz_build JOBS=$jobs bash tests/fuzz/run_fuzzers.sh "$fuzz_seconds"

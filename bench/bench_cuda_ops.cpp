@@ -6,7 +6,6 @@
 //   bench_cuda_ops [--filter substring] [--min-seconds 0.2]
 // Prints one JSON line per case: name, fwd_ms, fwd_bwd_ms, and the forward GFLOP/s where the case
 // has a FLOP count (convolutions, matmul). Without a usable CUDA device it says why and exits 2.
-#include <chrono>
 #include <cstdio>
 #include <cstring>
 #include <functional>
@@ -15,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/device_timer.h"
 #include "engine/autograd.h"
 #include "engine/backend_info.h"
 #include "engine/ops.h"
@@ -99,25 +99,6 @@ std::vector<Case> cases() {
   return c;
 }
 
-// Seconds per call of `once`, synchronising through `sync`: two warm-up calls, then calls until
-// `min_seconds` have passed (at least three).
-double time_per_call(const std::function<void()>& once, const std::function<void()>& sync,
-                     double min_seconds) {
-  once();
-  once();
-  sync();
-  int iters = 0;
-  const auto t0 = std::chrono::steady_clock::now();
-  double elapsed = 0;
-  while (iters < 3 || elapsed < min_seconds) {
-    once();
-    ++iters;
-    sync();
-    elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  }
-  return elapsed / iters;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -151,21 +132,21 @@ int main(int argc, char** argv) {
       t.requires_grad_(true);
       in.push_back(t);
     }
-    const double fwd = time_per_call(
+    const double fwd = cvd::bench::seconds_per_call(
         [&] {
           const cvd::NoGradGuard no_grad;
           (void)c.fn(in);
         },
-        sync, min_seconds);
+        sync, min_seconds, 2);
     cvd::Tensor out0 = c.fn(in);
     const cvd::Tensor gy = cvd::Tensor::randn(out0.shape(), g).to(gpu);
     out0 = cvd::Tensor();
-    const double fwd_bwd = time_per_call(
+    const double fwd_bwd = cvd::bench::seconds_per_call(
         [&] {
           const cvd::Tensor out = c.fn(in);
           (void)cvd::grad(out, in, gy);
         },
-        sync, min_seconds);
+        sync, min_seconds, 2);
     nlohmann::json j = {{"name", c.name}, {"fwd_ms", fwd * 1e3}, {"fwd_bwd_ms", fwd_bwd * 1e3}};
     if (c.fwd_flops > 0) j["fwd_gflops"] = c.fwd_flops / fwd * 1e-9;
     std::cout << j.dump() << std::endl;

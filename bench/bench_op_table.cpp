@@ -8,7 +8,6 @@
 // bench/bench_cuda_ops.cpp time the model-sized shapes.
 //   bench_op_table [--filter substring] [--min-seconds 0.05]
 // Prints one JSON line per case and backend.
-#include <chrono>
 #include <cstdio>
 #include <cstring>
 #include <functional>
@@ -17,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/device_timer.h"
 #include "engine/autograd.h"
 #include "engine/backend_info.h"
 #include "kernels/builtin_backends.h"
@@ -31,22 +31,6 @@ struct Backend {
   DType dtype;
   DeviceId device;
 };
-
-double seconds_per_call(const std::function<void()>& once, const std::function<void()>& sync,
-                        double min_seconds) {
-  once();
-  sync();
-  int iters = 0;
-  const auto t0 = std::chrono::steady_clock::now();
-  double elapsed = 0;
-  while (iters < 3 || elapsed < min_seconds) {
-    once();
-    ++iters;
-    sync();
-    elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  }
-  return elapsed / iters;
-}
 
 }  // namespace
 
@@ -81,18 +65,18 @@ int main(int argc, char** argv) {
         if (t.requires_grad()) diff.push_back(t);
       const Tensor probe = Tensor::zeros({1}, b.dtype, b.device);
       const auto sync = [&] { (void)probe.to(DeviceId::cpu()); };
-      const double fwd = seconds_per_call(
+      const double fwd = bench::seconds_per_call(
           [&] {
             const NoGradGuard no_grad;
             (void)c.fn(in);
           },
-          sync, min_seconds);
+          sync, min_seconds, 1);
       Generator g(1);
       const Tensor r = Tensor::randn(c.fn(in).shape(), g, b.dtype).to(b.device);
       const double fwd_bwd =
           diff.empty() ? 0.0
-                       : seconds_per_call([&] { (void)grad(sum(mul(c.fn(in), r)), diff); }, sync,
-                                          min_seconds);
+                       : bench::seconds_per_call([&] { (void)grad(sum(mul(c.fn(in), r)), diff); },
+                                                 sync, min_seconds, 1);
       nlohmann::json j = {{"case", c.name}, {"backend", b.name}, {"fwd_us", fwd * 1e6}};
       if (!diff.empty()) j["fwd_bwd_us"] = fwd_bwd * 1e6;
       std::cout << j.dump() << std::endl;

@@ -10,13 +10,13 @@
 
 namespace cvd::test {
 
-namespace {
-
 double max_abs(const std::vector<double>& v) {
   double m = 0;
   for (double x : v) m = std::max(m, std::abs(x));
   return m;
 }
+
+namespace {
 
 // The first element of `got` farther than `tol` from `want`, as a message; empty if none.
 std::string first_mismatch(const std::vector<double>& got, const std::vector<double>& want,

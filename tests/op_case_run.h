@@ -12,6 +12,9 @@
 
 namespace cvd::test {
 
+// The largest |x| (0 for none): the scale of the comparisons' tolerances.
+double max_abs(const std::vector<double>& v);
+
 // An input as the case specifies it: f64 on the CPU.
 Tensor make_case_input(const InputSpec& s, Generator& g);
 

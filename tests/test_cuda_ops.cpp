@@ -19,12 +19,6 @@
 namespace cvd::test {
 namespace {
 
-double max_abs(const std::vector<double>& v) {
-  double m = 0;
-  for (double x : v) m = std::max(m, std::abs(x));
-  return m;
-}
-
 class CudaOpTable : public ::testing::TestWithParam<OpCase> {};
 
 TEST_P(CudaOpTable, F32OnCudaVsReference) {

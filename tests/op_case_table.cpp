@@ -174,6 +174,11 @@ std::vector<OpCase> all_op_cases() {
   c.push_back(
       deconv_case("deconv_groups_dil", {1, 4, 3, 3}, {4, 1, 3, 3}, true, deconv(1, 1, 0, 2, 2)));
   c.push_back(deconv_case("deconv_1px", {2, 2, 1, 1}, {2, 3, 4, 4}, true, deconv(2, 1, 0)));
+  // 16 channels per group in and out: sized for the CPU's bf16 path (kernels/cpu/
+  // onednn_conv_choice.cpp), which the smaller cases above do not take.
+  c.push_back(conv_case("conv3x3_c16", {1, 16, 5, 6}, {16, 16, 3, 3}, true, conv(1, 1, 1, 1, 1)));
+  c.push_back(
+      deconv_case("deconv_k4s2p1_c16", {1, 16, 3, 3}, {16, 16, 4, 4}, true, deconv(2, 1, 0)));
   // ---- batch norm ----
   c.push_back(bn_case("batch_norm_train_affine", true, true));
   c.push_back(bn_case("batch_norm_train_plain", true, false));

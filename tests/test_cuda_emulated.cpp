@@ -1,7 +1,8 @@
 // The CUDA kernel bodies (kernels/cuda/*_body.h) run on the CPU by an emulated launch (a loop over
 // every thread index, kernels/cuda/launch_body.h), through the same op drivers the CUDA backend
 // registers, and compared with the float64 reference kernels (kernel_registry().find(op, cpu,
-// f64)) on random inputs. Plain C++: runs in every build, with or without nvcc or a GPU. Only
+// f64)) on random inputs, op by op and (EmulatedCudaOpTable, at the end) as a backend of the op
+// table. Plain C++: runs in every build, with or without nvcc or a GPU. Only
 // matmul (a cuBLAS call, no hand-written body) is not covered here; tests/test_cuda_ops.cpp runs
 // it on a real device. Tolerances: max |emulated - ref| <= tol * max |ref| per output, tol stated
 // per case (1e-5 for short sums, 1e-4 for long reductions in f32).
@@ -10,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "engine/backend_registry.h"
 #include "kernels/cuda/conv_body.h"
 #include "kernels/cuda/correlation_body.h"
 #include "kernels/cuda/layout_body.h"
@@ -18,6 +20,7 @@
 #include "kernels/cuda/resample_body.h"
 #include "kernels/cuda/rows_body.h"
 #include "tests/cpu_kernel_comparison.h"
+#include "tests/op_case_run.h"
 
 namespace cvd::test {
 namespace {
@@ -487,6 +490,94 @@ TEST(CudaEmulated, CorrelationAndChannelNorm) {
                    {normal(y, gen), xv, pair_of(fwd.ref[0], y)}, {x}, nullptr),
       1e-6, "channel_norm backward");
 }
+
+// ---- the op table on the emulated bodies -------------------------------------------------------
+// Every case of the op table (tests/op_case_table.cpp), forward and autograd backward, with the
+// CPU's f32 kernels replaced by the CUDA drivers under the emulated launch (a backend registered
+// in this process only; matmul, a cuBLAS call with no body, stays the CPU's), against the float64
+// reference: the same comparison (tests/op_case_run.h) the CPU and the real device run.
+
+#define CVD_EMULATED(registry, op, driver)                                       \
+  (registry).add(                                                                \
+      ::cvd::OpId::op, ::cvd::DeviceType::cpu, ::cvd::DType::f32,                \
+      [](const ::cvd::KernelArgs& a) { cuda::driver<cuda::EmulatedLaunch>(a); }, \
+      "cuda (emulated)")
+
+void register_emulated_cuda_kernels(KernelRegistry& r) {
+  CVD_EMULATED(r, conv2d, conv2d_op);
+  CVD_EMULATED(r, conv2d_backward_data, conv2d_backward_data_op);
+  CVD_EMULATED(r, conv2d_backward_weight, conv2d_backward_weight_op);
+  CVD_EMULATED(r, conv_transpose2d, conv_transpose2d_op);
+  CVD_EMULATED(r, conv_transpose2d_backward_data, conv_transpose2d_backward_data_op);
+  CVD_EMULATED(r, conv_transpose2d_backward_weight, conv_transpose2d_backward_weight_op);
+  CVD_EMULATED(r, correlation, correlation_op);
+  CVD_EMULATED(r, correlation_backward, correlation_backward_op);
+  CVD_EMULATED(r, channel_norm, channel_norm_op);
+  CVD_EMULATED(r, channel_norm_backward, channel_norm_backward_op);
+  CVD_EMULATED(r, reduce_sum, reduce_sum_op);
+  CVD_EMULATED(r, concat, concat_op);
+  CVD_EMULATED(r, pad, pad_op);
+  CVD_EMULATED(r, batch_norm, batch_norm_op);
+  CVD_EMULATED(r, batch_norm_backward, batch_norm_backward_op);
+  CVD_EMULATED(r, max_pool2d, max_pool2d_op);
+  CVD_EMULATED(r, max_pool2d_backward, max_pool2d_backward_op);
+  CVD_EMULATED(r, avg_pool2d, avg_pool2d_op);
+  CVD_EMULATED(r, avg_pool2d_backward, avg_pool2d_backward_op);
+  CVD_EMULATED(r, copy, copy_op);
+  CVD_EMULATED(r, fill, fill_op);
+  CVD_EMULATED(r, unary, unary_op);
+  CVD_EMULATED(r, unary_backward, unary_backward_op);
+  CVD_EMULATED(r, binary, binary_op);
+  CVD_EMULATED(r, where, where_op);
+  CVD_EMULATED(r, adam_update, adam_update_op);
+  CVD_EMULATED(r, sgd_update, sgd_update_op);
+  CVD_EMULATED(r, upsample_bilinear2d, upsample_bilinear2d_op);
+  CVD_EMULATED(r, upsample_bilinear2d_backward, upsample_bilinear2d_backward_op);
+  CVD_EMULATED(r, upsample_nearest2d, upsample_nearest2d_op);
+  CVD_EMULATED(r, upsample_nearest2d_backward, upsample_nearest2d_backward_op);
+  CVD_EMULATED(r, upsample_bicubic2d, upsample_bicubic2d_op);
+  CVD_EMULATED(r, upsample_bicubic2d_backward, upsample_bicubic2d_backward_op);
+  CVD_EMULATED(r, grid_sample, grid_sample_op);
+  CVD_EMULATED(r, grid_sample_backward, grid_sample_backward_op);
+  CVD_EMULATED(r, layer_norm, layer_norm_op);
+  CVD_EMULATED(r, layer_norm_backward, layer_norm_backward_op);
+  CVD_EMULATED(r, softmax, softmax_op);
+  CVD_EMULATED(r, softmax_backward, softmax_backward_op);
+}
+
+#undef CVD_EMULATED
+
+// Registers the emulated bodies over the CPU's f32 kernels (once per process).
+void use_emulated_cuda_kernels() {
+  static const bool done = [] {
+    BackendHooks b;
+    b.name = "cuda-emulated-test";
+    b.description = "CUDA kernel bodies, emulated launch on the CPU (tests only)";
+    b.register_kernels = &register_emulated_cuda_kernels;
+    register_backend(b);
+    return true;
+  }();
+  (void)done;
+}
+
+class EmulatedCudaOpTable : public ::testing::TestWithParam<OpCase> {};
+
+TEST_P(EmulatedCudaOpTable, F32VsReference) {
+  use_emulated_cuda_kernels();
+  ASSERT_STREQ(kernel_registry().find(OpId::binary, DeviceType::cpu, DType::f32)->impl,
+               "cuda (emulated)");
+  EXPECT_EQ(compare_with_reference(GetParam(), DeviceId::cpu(), 99), "");
+}
+
+TEST_P(EmulatedCudaOpTable, F32StridedInputsVsReference) {
+  use_emulated_cuda_kernels();
+  CompareOptions o;
+  o.strided_inputs = true;
+  EXPECT_EQ(compare_with_reference(GetParam(), DeviceId::cpu(), 99, o), "");
+}
+
+INSTANTIATE_TEST_SUITE_P(Ops, EmulatedCudaOpTable, ::testing::ValuesIn(all_op_cases()),
+                         [](const ::testing::TestParamInfo<OpCase>& i) { return i.param.name; });
 
 }  // namespace
 }  // namespace cvd::test

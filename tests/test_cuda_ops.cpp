@@ -2,7 +2,8 @@
 //  - CudaOpTable: every case of the op table (tests/op_case_table.cpp) with f32 inputs on the
 //    CUDA device, forward and autograd backward, against the float64 reference on the CPU, by
 //    the same comparison as the CPU's (tests/op_case_run.h).
-//    Skipped, with the runtime's reason, when no GPU is usable.
+//    The same again with every input a non-contiguous view. Skipped, with the runtime's reason,
+//    when no GPU is usable.
 //  - CudaCoverage: in a CUDA build every op with a CPU f32 kernel has a CUDA f32 kernel; without
 //    a GPU, asking for CUDA memory is a clear Error while CPU work continues.
 #include <gtest/gtest.h>
@@ -24,6 +25,13 @@ class CudaOpTable : public ::testing::TestWithParam<OpCase> {};
 TEST_P(CudaOpTable, F32OnCudaVsReference) {
   if (cuda_device_count() == 0) GTEST_SKIP() << "no CUDA device: " << cuda_runtime_status();
   EXPECT_EQ(compare_with_reference(GetParam(), DeviceId::cuda(), 99), "");
+}
+
+TEST_P(CudaOpTable, F32StridedInputsOnCudaVsReference) {
+  if (cuda_device_count() == 0) GTEST_SKIP() << "no CUDA device: " << cuda_runtime_status();
+  CompareOptions o;
+  o.strided_inputs = true;
+  EXPECT_EQ(compare_with_reference(GetParam(), DeviceId::cuda(), 99, o), "");
 }
 
 INSTANTIATE_TEST_SUITE_P(Ops, CudaOpTable, ::testing::ValuesIn(all_op_cases()),

@@ -1,8 +1,10 @@
-// The op table (tests/op_case_table.cpp) run two ways, like ggml's test-backend-ops:
+// The op table (tests/op_case_table.cpp) run four ways, like ggml's test-backend-ops:
 //  - GradCheck: in float64, the autograd gradient of sum(op(x) * R) against central finite
 //    differences, for every differentiable input element;
 //  - F32VsReference: the fast f32 kernels (forward and backward) against the float64 reference
-//    kernels on the same inputs (tests/op_case_run.h; test_cuda_ops runs the same on CUDA).
+//    kernels on the same inputs (tests/op_case_run.h; test_cuda_ops runs the same on CUDA);
+//  - F32StridedInputsVsReference: the same with non-contiguous input views;
+//  - Bf16VsReference: the same in the CPU's bf16 arithmetic, where the CPU has it natively.
 // Plus coverage: every op of the dispatch table has a reference kernel and a fast CPU kernel.
 #include <gtest/gtest.h>
 
@@ -10,6 +12,7 @@
 #include <cmath>
 
 #include "engine/autograd.h"
+#include "engine/compute_precision.h"
 #include "engine/dispatch.h"
 #include "engine/random.h"
 #include "tests/op_case_run.h"
@@ -71,6 +74,33 @@ TEST_P(OpTable, GradCheck) {
 
 TEST_P(OpTable, F32VsReference) {
   EXPECT_EQ(compare_with_reference(GetParam(), DeviceId::cpu(), 99), "");
+}
+
+// The same with every f32 input a non-contiguous view (transposed storage or a narrowed row).
+TEST_P(OpTable, F32StridedInputsVsReference) {
+  CompareOptions o;
+  o.strided_inputs = true;
+  EXPECT_EQ(compare_with_reference(GetParam(), DeviceId::cpu(), 99, o), "");
+}
+
+// The CPU's bf16 arithmetic (engine/compute_precision.h: convolutions on AVX512-BF16 / AMX, every
+// other op f32) as a backend of the table: every case within 2% of the float64 reference
+// (relative to max(1, |ref|max); gradients 8%), and the cases sized for it provably on the bf16
+// path (their output differs from the f32 run's).
+TEST_P(OpTable, Bf16VsReference) {
+  std::string why;
+  if (!bf16_supported(&why)) GTEST_SKIP() << "no native bf16 on this CPU: " << why;
+  const OpCase& c = GetParam();
+  const std::vector<double> f32 = run_case_f32(c, DeviceId::cpu(), 99);
+  ScopedComputePrecision bf16(ComputePrecision::bf16);
+  CompareOptions o;
+  o.min_tol = 2e-2;
+  EXPECT_EQ(compare_with_reference(c, DeviceId::cpu(), 99, o), "");
+  // The cases named *_c16 are sized for the bf16 path (16+ channels per group).
+  if (c.name.size() > 4 && c.name.compare(c.name.size() - 4, 4, "_c16") == 0) {
+    EXPECT_NE(run_case_f32(c, DeviceId::cpu(), 99), f32)
+        << c.name << ": the bf16 run gave the f32 run's output bit for bit";
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(Ops, OpTable, ::testing::ValuesIn(all_op_cases()),

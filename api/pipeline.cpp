@@ -35,6 +35,7 @@ RunOptions to_run_options(const PipelineOptions& p) {
   o.colmap_keyframes = p.colmap_keyframes;
   o.poses_source = p.poses_source;
   o.sparse_points = p.sparse_points;
+  o.given_poses = p.given_poses;
   o.pair_storage = p.pair_storage;
   o.flow = p.flow;
   o.dis_preset = p.dis_preset;
@@ -48,6 +49,7 @@ RunOptions to_run_options(const PipelineOptions& p) {
   o.lambda_disparity = p.lambda_disparity;
   o.seed = p.seed;
   o.warmup_steps = p.warmup_steps;
+  o.warmup_scale = p.warmup_scale;
   o.refine_poses = p.refine_poses;
   o.refine_focal = p.refine_focal;
   o.precision = p.precision;

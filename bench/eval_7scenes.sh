@@ -11,11 +11,13 @@
 # environment (defaults sized for a 2-core machine, ~30 min in all):
 #   FRAMES=40 FRAME_STEP=1 DEPTH_SIZE=192 WIDTH=0.125 EPOCHS=4 WARMUP=60
 #   INTRINSICS=525,525,320,240 (empty: estimated; ground-truth-pose runs then need --fov, skipped)
+#   EXTRA="--flag value ..." (more cvd run flags for every run)
 #   MODEL=weights.cvdw ARCH=mannequin|midas_small|midas_v2 (converted pretrained weights, optional)
 #   POSES="gt colmap" (which runs: gt, colmap, flow (cameras from optical flow, --poses-source
 #   flow); suffixes: "+all" gives COLMAP's mapper every frame
 #   (--colmap-keyframes all) instead of keyframes; "+colmappts" (gt only) triangulates the sparse
-#   points with COLMAP on the given poses (--sparse-points colmap); "+refine", last, adds
+#   points with COLMAP on the given poses (--sparse-points colmap); "+adjusted" (gt only) adjusts
+#   the given poses and their points on flow tracks (--given-poses adjusted); "+refine", last, adds
 #   --refine-poses $REFINE (default full) and reuses the cache of the run without it, so both start from the same poses
 #   and flow)
 # Needs jq; colmap on PATH for the COLMAP run (skipped with a note when absent).
@@ -31,6 +33,9 @@ FRAMES="${FRAMES:-40}" FRAME_STEP="${FRAME_STEP:-1}" DEPTH_SIZE="${DEPTH_SIZE:-1
 WIDTH="${WIDTH:-0.125}" EPOCHS="${EPOCHS:-4}" WARMUP="${WARMUP:-60}" POSES="${POSES:-gt colmap}"
 common=(--max-frames "$FRAMES" --frame-step "$FRAME_STEP" --depth-size "$DEPTH_SIZE"
   --epochs "$EPOCHS" --gt "$data" --no-videos)
+# EXTRA: more cvd run flags for every run (word-split), e.g. EXTRA="--warmup-scale video".
+read -r -a extra_flags <<<"${EXTRA:-}"
+common+=("${extra_flags[@]}")
 # INTRINSICS= (empty) leaves the focal to the pipeline's estimate (the run then needs no --intrinsics).
 INTRINSICS="${INTRINSICS-525,525,320,240}"
 [[ -n "$INTRINSICS" ]] && common+=(--intrinsics "$INTRINSICS")
@@ -52,6 +57,9 @@ for poses in $POSES; do
   fi
   if [[ $base == *+colmappts ]]; then
     extra+=(--sparse-points colmap)
+  fi
+  if [[ $base == *+adjusted ]]; then
+    extra+=(--given-poses adjusted)
   fi
   if [[ $base != "$poses" ]]; then
     extra+=(--refine-poses "${REFINE:-full}")

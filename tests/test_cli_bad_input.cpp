@@ -196,6 +196,20 @@ std::vector<BadInputCase> cases() {
        2,
        {"--quality", "ultra", "fast,default,best"},
        {"out"}},
+      {"unknown_given_poses_mode",
+       [](const TempDir& t) {
+         return run_args(t, write_frames(t / "frames", 3), "--given-poses refined");
+       },
+       2,
+       {"--given-poses", "refined", "fixed", "adjusted"},
+       {"out"}},
+      {"unknown_warmup_scale",
+       [](const TempDir& t) {
+         return run_args(t, write_frames(t / "frames", 3), "--warmup-scale scene");
+       },
+       2,
+       {"--warmup-scale", "scene", "frame", "video"},
+       {"out"}},
       {"intrinsics_three_numbers",
        [](const TempDir& t) {
          return run_args(t, write_frames(t / "frames", 3), "--intrinsics 60,60,31.5");

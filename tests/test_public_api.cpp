@@ -204,6 +204,8 @@ TEST(PublicApi, PipelineRejectsUnknownSettingsBeforeCreatingAnything) {
   const std::vector<std::function<void(cvd::PipelineOptions&)>> bad = {
       [](cvd::PipelineOptions& o) { o.refine_poses = "yes"; },
       [](cvd::PipelineOptions& o) { o.sparse_points = "sift"; },
+      [](cvd::PipelineOptions& o) { o.given_poses = "refined"; },
+      [](cvd::PipelineOptions& o) { o.warmup_scale = "scene"; },
       [](cvd::PipelineOptions& o) { o.poses_source = "slam"; },
       [](cvd::PipelineOptions& o) { o.colmap_keyframes = "1"; },
       [](cvd::PipelineOptions& o) { o.steps = -1; },

@@ -66,6 +66,10 @@ struct PipelineOptions {
   /// --sparse-points (with poses_file): "flow" (flow tracks), "colmap" (COLMAP's
   /// point_triangulator on the given poses) or "auto" (colmap when it is on PATH)
   std::string sparse_points = "flow";
+  /// --given-poses (with poses_file): "fixed", or "adjusted" (the flow bundle adjustment starts
+  /// from them: cameras and sparse points fitted to flow tracks of the frames; focal and units
+  /// kept)
+  std::string given_poses = "fixed";
 
   // Flow
   /// --pairs: training pairs "memory", "stream" (read from OUT/cache/flow per batch) or "auto"
@@ -87,6 +91,9 @@ struct PipelineOptions {
   double lambda_disparity = -1;  ///< --lambda
   std::uint64_t seed = 1;        ///< --seed
   int warmup_steps = 100;        ///< --warmup
+  /// --warmup-scale: the warm-up fits sparse depths up to one scale per "frame", in absolute
+  /// log depth ("video"), or "auto" (frame for flow-track points of given poses, else video)
+  std::string warmup_scale = "auto";
   /// --refine-poses: "none", "rotation" or "full" (rotations and centres), refined with the depth
   /// through the geometric loss; the results carry the refined cameras
   std::string refine_poses = "none";

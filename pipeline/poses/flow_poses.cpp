@@ -160,6 +160,94 @@ std::vector<PixelTrack> thin(const std::vector<PixelTrack>& tracks, size_t at_mo
   return out;
 }
 
+// The adjustment from each start (focal candidate x rotation chaining) on a subset of the tracks,
+// side by side; the starts with the lowest truncated error are adjusted further on every track
+// from where they ended, and the lowest error there wins.
+Attempt adjust_from_candidates(const std::vector<PixelTrack>& tracks,
+                               const std::vector<bool>& usable, const TrackCameras& base,
+                               bool focal_known, cv::Size work, double sx, const FlowPoseOptions& o,
+                               FlowPoseResult& res) {
+  res.focal_method = focal_known ? "given" : "flow bundle adjustment";
+  std::vector<double> focals;
+  if (focal_known) {
+    focals.push_back(base.focal);
+  } else {
+    for (double fov : o.candidate_fov_deg)
+      focals.push_back(0.5 * work.width / std::tan(0.5 * fov * M_PI / 180.0));
+  }
+  struct Start {
+    double focal, rotation_only_px;
+  };
+  std::vector<Start> starts;
+  for (double focal : focals)
+    for (double rotation_only_px : {0.0, std::numeric_limits<double>::infinity()})
+      starts.push_back({focal, rotation_only_px});
+  const std::vector<PixelTrack> few = thin(tracks, size_t(o.candidate_tracks));
+  std::vector<Attempt> tried(starts.size());
+  run_side_by_side(starts.size(), worker_threads(o), [&](size_t i) {
+    TrackCameras c = base;
+    c.focal = starts[i].focal;
+    tried[i] = start_from(few, usable, c, starts[i].rotation_only_px);
+    adjust(tried[i], few, usable, !focal_known, o, 25);
+  });
+  std::vector<size_t> order;
+  for (size_t i = 0; i < starts.size(); ++i) {
+    const Attempt& a = tried[i];
+    FlowPoseCandidate cand;
+    cand.start_fov_deg = 2.0 * std::atan(0.5 * work.width / starts[i].focal) * 180.0 / M_PI;
+    cand.start_focal_px = starts[i].focal / sx;
+    cand.focal_px = a.cams.focal / sx;
+    cand.rotations = rotation_start_name(starts[i].rotation_only_px);
+    cand.rms_px = a.report.rms_px;
+    cand.score = a.ok ? a.score : -1;
+    res.candidates.push_back(cand);
+    spdlog::info(
+        "poses: flow adjustment from {:.0f} deg ({:.1f} px), {}: focal {:.1f} px, truncated "
+        "mean square error {:.4g} px^2, RMS {:.2f} px",
+        cand.start_fov_deg, cand.start_focal_px, cand.rotations, cand.focal_px, a.score,
+        cand.rms_px);
+    if (a.ok) order.push_back(i);
+  }
+  if (order.empty())
+    fail(ErrorCategory::external, "flow poses: no start gave a usable bundle adjustment");
+  std::stable_sort(order.begin(), order.end(),
+                   [&](size_t a, size_t b) { return tried[a].score < tried[b].score; });
+  {
+    // Finalists: the best starts that ended in different minima (a start whose focal and error
+    // are both within 1% of a better one's ended where that one did).
+    std::vector<size_t> distinct;
+    for (size_t i : order) {
+      bool same = false;
+      for (size_t j : distinct)
+        same = same || (std::abs(tried[i].cams.focal / tried[j].cams.focal - 1) < 0.01 &&
+                        std::abs(tried[i].score / tried[j].score - 1) < 0.01);
+      if (!same) distinct.push_back(i);
+      if (distinct.size() == size_t(std::max(1, o.finalists))) break;
+    }
+    order = std::move(distinct);
+  }
+  std::vector<Attempt> finals(order.size());
+  run_side_by_side(order.size(), worker_threads(o), [&](size_t i) {
+    finals[i] = continue_from(tracks, usable, tried[order[i]]);
+    adjust(finals[i], tracks, usable, !focal_known, o, 50);
+  });
+  size_t won = order.size();
+  for (size_t i = 0; i < order.size(); ++i) {
+    res.candidates[order[i]].final_score = finals[i].ok ? finals[i].score : -1;
+    res.candidates[order[i]].final_focal_px = finals[i].cams.focal / sx;
+    spdlog::info(
+        "poses: on every track, the start from {:.0f} deg, {}: focal {:.1f} px, truncated "
+        "mean square error {:.4g} px^2",
+        res.candidates[order[i]].start_fov_deg, res.candidates[order[i]].rotations,
+        finals[i].cams.focal / sx, finals[i].score);
+    if (finals[i].ok && (won == order.size() || finals[i].score < finals[won].score)) won = i;
+  }
+  if (won == order.size())
+    fail(ErrorCategory::external, "flow poses: the bundle adjustment failed");
+  res.rotation_start = rotation_start_name(starts[order[won]].rotation_only_px);
+  return std::move(finals[won]);
+}
+
 }  // namespace
 
 FlowPoseTracks track_frames(const std::vector<std::string>& names,
@@ -210,9 +298,14 @@ FlowPoseTracks track_frames(const std::vector<std::string>& names,
 FlowPoseResult estimate_flow_poses(const std::vector<std::string>& names,
                                    const std::function<cv::Mat(size_t)>& frame,
                                    const std::function<cv::Mat(size_t)>& mask,
-                                   const std::optional<Intrinsics>& K, const FlowPoseOptions& o) {
+                                   const std::optional<Intrinsics>& K, const FlowPoseOptions& o,
+                                   const std::vector<NamedCamera>* start) {
   const auto t0 = std::chrono::steady_clock::now();
   const size_t n = names.size();
+  CVD_CHECK(!start || (K && start->size() == n),
+            "flow poses: starting cameras need the intrinsics and one camera per frame ({} for {} "
+            "frames)",
+            start ? start->size() : 0, n);
   FlowPoseResult res;
   FlowPoseTracks pt = track_frames(names, frame, mask, o);
   res.flow_seconds = pt.seconds;
@@ -229,7 +322,8 @@ FlowPoseResult estimate_flow_poses(const std::vector<std::string>& names,
   for (const auto& t : tracks)
     for (const auto& ob : t.observations) ++views[size_t(ob.frame)];
   std::vector<bool> usable(n);
-  for (size_t k = 0; k < n; ++k) usable[k] = views[k] >= o.min_frame_observations;
+  for (size_t k = 0; k < n; ++k)
+    usable[k] = views[k] >= o.min_frame_observations && (!start || (*start)[k].registered);
 
   // ---- intrinsics at the working resolution (square pixels: y rescaled by fx / fy) ----
   TrackCameras base;
@@ -250,94 +344,33 @@ FlowPoseResult estimate_flow_poses(const std::vector<std::string>& names,
   }
   base.R.assign(n, Eigen::Matrix3d::Identity());
   base.c.assign(n, Eigen::Vector3d::Zero());
-
-  // ---- adjustment: from each start (focal candidate x rotation chaining) on a subset of the
-  // tracks, side by side; the starts with the lowest truncated error are adjusted further on every
-  // track from where they ended, and the lowest error there wins ----
-  const auto ta = std::chrono::steady_clock::now();
-  res.focal_method = K ? "given" : "flow bundle adjustment";
-  std::vector<double> focals;
-  if (K) {
-    focals.push_back(base.focal);
-  } else {
-    for (double fov : o.candidate_fov_deg)
-      focals.push_back(0.5 * work.width / std::tan(0.5 * fov * M_PI / 180.0));
-  }
-  struct Start {
-    double focal, rotation_only_px;
-  };
-  std::vector<Start> starts;
-  for (double focal : focals)
-    for (double rotation_only_px : {0.0, std::numeric_limits<double>::infinity()})
-      starts.push_back({focal, rotation_only_px});
-  const std::vector<PixelTrack> few = thin(tracks, size_t(o.candidate_tracks));
-  std::vector<Attempt> tried(starts.size());
-  run_side_by_side(starts.size(), worker_threads(o), [&](size_t i) {
-    TrackCameras c = base;
-    c.focal = starts[i].focal;
-    tried[i] = start_from(few, usable, c, starts[i].rotation_only_px);
-    adjust(tried[i], few, usable, !K, o, 25);
-  });
-  std::vector<size_t> order;
-  for (size_t i = 0; i < starts.size(); ++i) {
-    const Attempt& a = tried[i];
-    FlowPoseCandidate cand;
-    cand.start_fov_deg = 2.0 * std::atan(0.5 * work.width / starts[i].focal) * 180.0 / M_PI;
-    cand.start_focal_px = starts[i].focal / sx;
-    cand.focal_px = a.cams.focal / sx;
-    cand.rotations = rotation_start_name(starts[i].rotation_only_px);
-    cand.rms_px = a.report.rms_px;
-    cand.score = a.ok ? a.score : -1;
-    res.candidates.push_back(cand);
-    spdlog::info(
-        "poses: flow adjustment from {:.0f} deg ({:.1f} px), {}: focal {:.1f} px, truncated "
-        "mean square error {:.4g} px^2, RMS {:.2f} px",
-        cand.start_fov_deg, cand.start_focal_px, cand.rotations, cand.focal_px, a.score,
-        cand.rms_px);
-    if (a.ok) order.push_back(i);
-  }
-  if (order.empty())
-    fail(ErrorCategory::external, "flow poses: no start gave a usable bundle adjustment");
-  std::stable_sort(order.begin(), order.end(),
-                   [&](size_t a, size_t b) { return tried[a].score < tried[b].score; });
-  {
-    // Finalists: the best starts that ended in different minima (a start whose focal and error
-    // are both within 1% of a better one's ended where that one did).
-    std::vector<size_t> distinct;
-    for (size_t i : order) {
-      bool same = false;
-      for (size_t j : distinct)
-        same = same || (std::abs(tried[i].cams.focal / tried[j].cams.focal - 1) < 0.01 &&
-                        std::abs(tried[i].score / tried[j].score - 1) < 0.01);
-      if (!same) distinct.push_back(i);
-      if (distinct.size() == size_t(std::max(1, o.finalists))) break;
+  if (start) {
+    for (size_t k = 0; k < n; ++k) {
+      base.R[k] = (*start)[k].pose.R;
+      base.c[k] = (*start)[k].pose.t;
     }
-    order = std::move(distinct);
   }
-  std::vector<Attempt> finals(order.size());
-  run_side_by_side(order.size(), worker_threads(o), [&](size_t i) {
-    finals[i] = continue_from(tracks, usable, tried[order[i]]);
-    adjust(finals[i], tracks, usable, !K, o, 50);
-  });
-  size_t won = order.size();
-  for (size_t i = 0; i < order.size(); ++i) {
-    res.candidates[order[i]].final_score = finals[i].ok ? finals[i].score : -1;
-    res.candidates[order[i]].final_focal_px = finals[i].cams.focal / sx;
-    spdlog::info(
-        "poses: on every track, the start from {:.0f} deg, {}: focal {:.1f} px, truncated "
-        "mean square error {:.4g} px^2",
-        res.candidates[order[i]].start_fov_deg, res.candidates[order[i]].rotations,
-        finals[i].cams.focal / sx, finals[i].score);
-    if (finals[i].ok && (won == order.size() || finals[i].score < finals[won].score)) won = i;
+
+  // ---- adjustment: of the given start cameras (focal fixed), or from every candidate ----
+  const auto ta = std::chrono::steady_clock::now();
+  Attempt best;
+  if (start) {
+    Attempt from;
+    from.cams = base;
+    best = continue_from(tracks, usable, from);
+    res.start_score_px2 = truncated_score(tracks, usable, best.cams, best.points, o.outlier_px);
+    adjust(best, tracks, usable, false, o, 50);
+    if (!best.ok) fail(ErrorCategory::external, "flow poses: the bundle adjustment failed");
+    res.focal_method = "given";
+    res.rotation_start = "given poses";
+  } else {
+    best = adjust_from_candidates(tracks, usable, base, K.has_value(), work, sx, o, res);
   }
-  if (won == order.size())
-    fail(ErrorCategory::external, "flow poses: the bundle adjustment failed");
-  Attempt best = std::move(finals[won]);
-  res.rotation_start = rotation_start_name(starts[order[won]].rotation_only_px);
   res.adjustment_seconds = seconds_since(ta);
   res.guessed_rotations = best.guessed;
   res.residuals = best.report.residuals;
   res.rms_px = best.report.rms_px;
+  res.score_px2 = best.score;
 
   // ---- registered frames, exported points, scale ----
   std::fill(views.begin(), views.end(), 0);
@@ -377,7 +410,7 @@ FlowPoseResult estimate_flow_poses(const std::vector<std::string>& names,
       if (inliers[t].size() >= 2) p.push_back(parallax[t]);
     res.median_parallax_deg = upper_median(std::move(p));
   }
-  // Units: the median depth of the exported points is 1.
+  // Units: the median depth of the exported points is 1 (estimated cameras).
   std::vector<double> depths;
   for (size_t t = 0; t < tracks.size(); ++t) {
     if (!exported(t)) continue;
@@ -387,7 +420,7 @@ FlowPoseResult estimate_flow_poses(const std::vector<std::string>& names,
                            .z());
   }
   double unit = upper_median(std::move(depths), 1.0);
-  if (!(unit > 0)) unit = 1.0;
+  if (!(unit > 0) || start) unit = 1.0;  // given cameras keep their units
 
   // ---- cameras and model at the frames' resolution ----
   Intrinsics Kout;

@@ -63,7 +63,10 @@ struct FlowPoseResult {
   std::string rotation_start;  // the chaining of the start that won (FlowPoseCandidate::rotations)
   std::vector<FlowPoseCandidate> candidates;
   int tracks = 0, residuals = 0, points = 0, guessed_rotations = 0;
-  double rms_px = 0;               // of the inlier observations after the last pass
+  double rms_px = 0;  // of the inlier observations after the last pass
+  // Mean over every observation of min(error^2, outlier_px^2), px^2 at the working resolution:
+  // with the start cameras and points intersected from them (start cameras only), and at the end.
+  double start_score_px2 = 0, score_px2 = 0;
   double median_parallax_deg = 0;  // of the tracks' widest ray angle
   double flow_seconds = 0, adjustment_seconds = 0, seconds = 0;
 };
@@ -84,10 +87,14 @@ FlowPoseTracks track_frames(const std::vector<std::string>& names,
 // K: known intrinsics at the frames' resolution, or nullopt (estimated). Throws
 // Error(invalid_argument) for fewer than 2 frames or frames of different sizes, Error(external)
 // when the flow gives no usable tracks at all.
+// start: cameras to start from instead of the candidates (given poses, camera-to-world, one per
+// frame; unregistered ones stay unregistered); needs K, keeps the start's units and adjusts the
+// cameras and points on the tracks with the focal fixed.
 FlowPoseResult estimate_flow_poses(const std::vector<std::string>& names,
                                    const std::function<cv::Mat(size_t)>& frame,
                                    const std::function<cv::Mat(size_t)>& mask,
                                    const std::optional<Intrinsics>& K,
-                                   const FlowPoseOptions& options = {});
+                                   const FlowPoseOptions& options = {},
+                                   const std::vector<NamedCamera>* start = nullptr);
 
 }  // namespace cvd

@@ -2,6 +2,8 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
+#include <cmath>
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -15,11 +17,42 @@ namespace cvd {
 namespace fs = std::filesystem;
 using json = nlohmann::json;
 
+namespace {
+
+// How far adjusted cameras moved from the start: rotation angles (degrees) and centre distances
+// (the start's units), mean and max over the frames registered in both.
+json camera_change(const std::vector<NamedCamera>& from, const std::vector<NamedCamera>& to) {
+  double rot_sum = 0, rot_max = 0, c_sum = 0, c_max = 0;
+  int n = 0;
+  for (size_t k = 0; k < from.size() && k < to.size(); ++k) {
+    if (!from[k].registered || !to[k].registered) continue;
+    const Eigen::Matrix3d d = from[k].pose.R.transpose() * to[k].pose.R;
+    const double angle = std::acos(std::clamp(0.5 * (d.trace() - 1.0), -1.0, 1.0)) * 180.0 / M_PI;
+    const double move = (to[k].pose.t - from[k].pose.t).norm();
+    rot_sum += angle;
+    rot_max = std::max(rot_max, angle);
+    c_sum += move;
+    c_max = std::max(c_max, move);
+    ++n;
+  }
+  const double inv = n ? 1.0 / n : 0.0;
+  return {{"frames", n},
+          {"rotation_mean_deg", rot_sum * inv},
+          {"rotation_max_deg", rot_max},
+          {"centre_mean", c_sum * inv},
+          {"centre_max", c_max}};
+}
+
+}  // namespace
+
 void run_flow_poses(const RunOptions& o, const FramesStage& f, const std::optional<Intrinsics>& K,
-                    const fs::path& cache, PosesStage& st, json& intrinsics_info) {
-  const fs::path dir = cache / "flow_poses", model_dir = dir / "result_model";
+                    const fs::path& cache, PosesStage& st, json& intrinsics_info,
+                    const std::vector<NamedCamera>* start) {
+  const fs::path dir = cache / (start ? "flow_poses_given" : "flow_poses"),
+                 model_dir = dir / "result_model";
   const FlowPoseOptions fo;
   json key = {{"masks", o.masks.string()},
+              {"start_cameras_crc32", start ? json(cameras_crc32(*start)) : json()},
               {"intrinsics", K ? json{K->fx, K->fy, K->cx, K->cy, K->width, K->height} : json()},
               {"long_side", fo.long_side},
               {"frames", f.names},
@@ -41,7 +74,7 @@ void run_flow_poses(const RunOptions& o, const FramesStage& f, const std::option
       return cv::imread(mp.string(), cv::IMREAD_GRAYSCALE);
     };
     FlowPoseResult r = estimate_flow_poses(
-        f.names, [&](size_t k) { return f.load(static_cast<int>(k)); }, mask, K, fo);
+        f.names, [&](size_t k) { return f.load(static_cast<int>(k)); }, mask, K, fo, start);
     for (const auto& w : r.warnings) spdlog::warn("poses: {}", w);
     spdlog::info(
         "poses: cameras from optical flow: {} of {} frames, {} tracks, {} points, RMS {:.2f} px, "
@@ -67,6 +100,7 @@ void run_flow_poses(const RunOptions& o, const FramesStage& f, const std::option
             {"residuals", r.residuals},
             {"points", r.points},
             {"rms_px", r.rms_px},
+            {"score_px2", r.score_px2},
             {"median_parallax_deg", r.median_parallax_deg},
             {"guessed_rotations", r.guessed_rotations},
             {"unregistered", r.unregistered},
@@ -77,6 +111,15 @@ void run_flow_poses(const RunOptions& o, const FramesStage& f, const std::option
             {"flow_seconds", r.flow_seconds},
             {"adjustment_seconds", r.adjustment_seconds},
             {"seconds", r.seconds}};
+    if (start) {
+      info["start_score_px2"] = r.start_score_px2;
+      info["camera_change"] = camera_change(*start, r.cameras);
+      spdlog::info(
+          "poses: given poses adjusted on flow tracks: truncated mean square error {:.3g} -> "
+          "{:.3g} px^2; rotations moved {:.3f} deg on average (at most {:.3f})",
+          r.start_score_px2, r.score_px2, info["camera_change"]["rotation_mean_deg"].get<double>(),
+          info["camera_change"]["rotation_max_deg"].get<double>());
+    }
     fs::create_directories(dir);
     write_colmap_text_model(model_dir, model);
     write_text_file(dir / "info.json", info.dump(1));
@@ -94,7 +137,7 @@ void run_flow_poses(const RunOptions& o, const FramesStage& f, const std::option
   }
   for (auto& c : st.cameras)
     if (!c.registered && Kused) c.intrinsics = *Kused;
-  st.source = "flow";
+  st.source = start ? st.source + ", adjusted on flow tracks" : "flow";
   st.info["flow_poses"] = info;
   if (!K) {
     st.intrinsics_source = "estimated (flow bundle adjustment)";

@@ -89,7 +89,7 @@ json start_network(const RunOptions& o, DepthNet& net, const std::function<Tenso
   // Flow-triangulated points are fitted up to one scale per frame (measured on 7-Scenes frames
   // 0-39 with flow-track points: final AbsRel 0.147 this way, 0.169 with absolute log depth);
   // SfM points in absolute log depth.
-  so.scale_free_per_frame = !from_sfm;
+  so.scale_free_per_frame = o.warmup_scale == "auto" ? !from_sfm : o.warmup_scale == "frame";
   if (o.progress) {
     so.progress = [&](int step, int steps, const std::string& detail) {
       o.progress({"warm-up", step, steps, detail});

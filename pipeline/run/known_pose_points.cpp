@@ -1,7 +1,6 @@
 #include "pipeline/run/known_pose_points.h"
 
 #include <spdlog/spdlog.h>
-#include <zlib.h>
 
 #include <nlohmann/json.hpp>
 
@@ -14,27 +13,6 @@ namespace cvd {
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;
-
-namespace {
-
-uint32_t cameras_crc(const std::vector<NamedCamera>& cams, const Intrinsics& K) {
-  uLong crc = crc32(0L, Z_NULL, 0);
-  auto add = [&](const double* v, size_t count) {
-    crc = crc32(crc, reinterpret_cast<const Bytef*>(v), static_cast<uInt>(count * sizeof(double)));
-  };
-  const double k[4] = {K.fx, K.fy, K.cx, K.cy};
-  add(k, 4);
-  for (const auto& c : cams) {
-    double v[13];
-    for (int i = 0; i < 9; ++i) v[i] = c.pose.R(i / 3, i % 3);
-    for (int i = 0; i < 3; ++i) v[9 + i] = c.pose.t[i];
-    v[12] = c.registered ? 1.0 : 0.0;
-    add(v, 13);
-  }
-  return static_cast<uint32_t>(crc);
-}
-
-}  // namespace
 
 void add_known_pose_points(const RunOptions& o, const FramesStage& f, const Intrinsics& K,
                            const fs::path& cache, PosesStage& st) {
@@ -55,7 +33,7 @@ void add_known_pose_points(const RunOptions& o, const FramesStage& f, const Intr
               {"max_features", o.colmap_max_features},
               {"keyframes", o.colmap_keyframes},
               {"masks", o.masks.string()},
-              {"cameras_crc32", cameras_crc(st.cameras, K)},
+              {"cameras_crc32", cameras_crc32(st.cameras)},
               {"frames", f.names}};
   ColmapModel model;
   const json cached_key = read_cache_json(dir / "cache_key.json");

@@ -55,6 +55,11 @@ struct RunOptions {
   // point_triangulator on the given poses; required) or "auto" (colmap when it is on PATH, else
   // flow tracks).
   std::string sparse_points = "flow";
+  // Given poses as they are ("fixed") or as the start of the flow bundle adjustment ("adjusted":
+  // cameras and points adjusted on flow tracks of the frames, focal and units kept;
+  // pipeline/poses/flow_poses.h), for poses from another sensor that need not agree with the
+  // frames exactly.
+  std::string given_poses = "fixed";
   // Training pairs: "memory" (all loaded), "stream" (read from cache/flow per batch, prefetched;
   // memory independent of the number of pairs), "auto" (stream above 1 GiB of pairs).
   std::string pair_storage = "auto";
@@ -81,6 +86,10 @@ struct RunOptions {
   double lambda_disparity = -1;
   uint64_t seed = 1;
   int warmup_steps = 100;  // default network only: fit sparse SfM depth first
+  // How the warm-up fits the sparse depths: "frame" (log depth up to one scale per frame), "video"
+  // (absolute log depth, one scale for the video) or "auto" (frame for points triangulated from
+  // flow tracks with given poses, video for SfM points).
+  std::string warmup_scale = "auto";
   // Refine the cameras through the geometric loss while training
   // (pipeline/training/camera_refinement.h): refine_poses "none", "rotation" (rotations only) or
   // "full" (rotations and centres); refine_focal the focal length.

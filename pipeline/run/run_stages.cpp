@@ -1,6 +1,7 @@
 #include "pipeline/run/run_stages.h"
 
 #include <spdlog/spdlog.h>
+#include <zlib.h>
 
 #include <algorithm>
 #include <cctype>
@@ -40,6 +41,17 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 }
 
 }  // namespace
+
+uint32_t cameras_crc32(const std::vector<NamedCamera>& cams) {
+  uLong crc = crc32(0L, Z_NULL, 0);
+  for (const auto& c : cams) {
+    double v[17] = {c.intrinsics.fx, c.intrinsics.fy, c.intrinsics.cx, c.intrinsics.cy,
+                    c.pose.t.x(),    c.pose.t.y(),    c.pose.t.z(),    c.registered ? 1.0 : 0.0};
+    for (int k = 0; k < 9; ++k) v[8 + k] = c.pose.R(k / 3, k % 3);
+    crc = crc32(crc, reinterpret_cast<const Bytef*>(v), sizeof v);
+  }
+  return static_cast<uint32_t>(crc);
+}
 
 json read_cache_json(const fs::path& file) {
   std::ifstream in(file);
@@ -294,8 +306,20 @@ PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::
            o.poses_file.string());
     st.cameras = cameras_from_file(o, f, *K);
     st.source = o.poses_format + " file " + o.poses_file.string();
-    add_known_pose_points(o, f, *K, cache, st);
+    if (o.given_poses == "adjusted") {
+      if (o.sparse_points != "flow")
+        spdlog::warn(
+            "poses: --sparse-points {} is not used with --given-poses adjusted (the points come "
+            "from the adjustment on flow tracks)",
+            o.sparse_points);
+      const std::vector<NamedCamera> given = st.cameras;
+      run_flow_poses(o, f, K, cache, st, intrinsics_info, &given);
+    } else {
+      add_known_pose_points(o, f, *K, cache, st);
+    }
   } else {
+    if (o.given_poses != "fixed" || o.sparse_points != "flow")
+      spdlog::warn("poses: --given-poses and --sparse-points apply to --poses only; not used");
     // --poses-source: COLMAP, the flow (pipeline/run/flow_pose_stage.h), or COLMAP and the flow
     // where COLMAP cannot pose the clip.
     bool use_flow = o.poses_source == "flow";

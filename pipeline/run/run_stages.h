@@ -75,6 +75,8 @@ void report_stage_progress(const RunOptions& o, const std::string& stage, int do
                            const std::string& msg = "");
 // The JSON of a cache file (a stage's settings key or record); null when missing or unreadable.
 nlohmann::json read_cache_json(const std::filesystem::path& file);
+// Fingerprint of cameras (intrinsics, poses, registration) for the caches' keys.
+uint32_t cameras_crc32(const std::vector<NamedCamera>& cams);
 
 // RGB in [0, 1], [3, H, W] f32, at `size`.
 Tensor frame_tensor(const cv::Mat& bgr, cv::Size size);

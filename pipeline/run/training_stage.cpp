@@ -1,7 +1,6 @@
 #include "pipeline/run/training_stage.h"
 
 #include <spdlog/spdlog.h>
-#include <zlib.h>
 
 #include <algorithm>
 #include <memory>
@@ -16,18 +15,6 @@ namespace cvd {
 namespace {
 
 using json = nlohmann::json;
-
-// Fingerprint of the cameras training sees (a rerun of COLMAP gives other poses).
-uint32_t cameras_crc32(const std::vector<NamedCamera>& cams) {
-  uLong crc = crc32(0L, Z_NULL, 0);
-  for (const auto& c : cams) {
-    double v[17] = {c.intrinsics.fx, c.intrinsics.fy, c.intrinsics.cx, c.intrinsics.cy,
-                    c.pose.t.x(),    c.pose.t.y(),    c.pose.t.z(),    c.registered ? 1.0 : 0.0};
-    for (int k = 0; k < 9; ++k) v[8 + k] = c.pose.R(k / 3, k % 3);
-    crc = crc32(crc, reinterpret_cast<const Bytef*>(v), sizeof v);
-  }
-  return static_cast<uint32_t>(crc);
-}
 
 std::unique_ptr<CameraRefinement> camera_refinement(const RunOptions& o,
                                                     const std::vector<NamedCamera>& cams) {
@@ -76,6 +63,7 @@ TrainingStage run_training_stage(const RunOptions& o, DepthNet& net,
                        {"steps_per_epoch", to.steps_per_epoch},
                        {"seed", to.seed},
                        {"warmup_steps", o.warmup_steps},
+                       {"warmup_scale", o.warmup_scale},
                        {"pair_precision", o.pair_precision},
                        {"masks", o.masks.string()},
                        {"poses", poses_source},
@@ -84,6 +72,7 @@ TrainingStage run_training_stage(const RunOptions& o, DepthNet& net,
                        {"pairs", pairs.size()},
                        {"cameras_crc32", cameras_crc32(cams)},
                        {"sparse_points", o.sparse_points},
+                       {"given_poses", o.given_poses},
                        {"refine_poses", o.refine_poses},
                        {"refine_focal", o.refine_focal}}
                       .dump();

@@ -85,6 +85,10 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s, bool grou
                 "COLMAP's point_triangulator on the given poses (colmap), or colmap when it is on "
                 "PATH (auto)")
       ->check(CLI::IsMember({"auto", "colmap", "flow"}));
+  c->add_option("--given-poses", o.given_poses,
+                "With --poses: use them as they are (fixed), or adjust them and their sparse "
+                "points to flow tracks of the frames, focal and units kept (adjusted)")
+      ->check(CLI::IsMember({"fixed", "adjusted"}));
   c->add_option("--pairs", o.pair_storage,
                 "Training pairs: all in memory, streamed from OUT/cache/flow per batch (memory "
                 "independent of the number of pairs; prefetched), or auto (stream above 1 GiB)")
@@ -125,6 +129,11 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s, bool grou
   c->add_option("--seed", o.seed, "Random seed");
   s.warmup = c->add_option("--warmup", o.warmup_steps,
                            "Sparse-depth warm-up steps of the default network");
+  c->add_option("--warmup-scale", o.warmup_scale,
+                "How the warm-up fits the sparse depths: up to one scale per frame (frame), in "
+                "absolute log depth (video), or auto (frame for flow-track points of given poses, "
+                "video for SfM points)")
+      ->check(CLI::IsMember({"auto", "frame", "video"}));
   c->add_option("--refine-poses", o.refine_poses,
                 "Refine the cameras with the depth through the geometric loss: none, rotation, or "
                 "full (rotations and centres); the first camera stays fixed and the outputs carry "

@@ -1,9 +1,10 @@
-// Element-wise math shared by every backend: the reference loops, the OpenMP CPU kernels and
-// the CUDA kernels all call these functions, so their logic is tested on the CPU.
+// The element-wise ops, defined once: their names, parameters and math, shared by every backend
+// (the reference loops, the OpenMP CPU kernels and the CUDA kernels all call these functions, so
+// their logic is tested on the CPU). A new unary op is one X(...) line and its cases below, its
+// public function in engine/ops.h and its line in tests/op_case_table.cpp.
 #pragma once
 #include <cmath>
-
-#include "engine/kernel_params.h"
+#include <cstdint>
 
 #if defined(__CUDACC__)
 #define CVD_HOST_DEVICE __host__ __device__ __forceinline__
@@ -13,9 +14,76 @@
 
 namespace cvd {
 
+// The unary ops, one X(name, cost) each; the enum, op names and the CPU kernels' compile-time
+// switch are generated from this list. cost: relative cost of one element (a transcendental is
+// ~20x a max or an add), which sizes the CPU kernels' parallel chunks.
+//   relu        max(x, 0)
+//   clip        min(max(x, a), b) (relu6 = clip 0..6); gradient 1 strictly inside (a, b)
+//   leaky_relu  x > 0 ? x : a * x
+//   sigmoid, tanh, exp, log, sqrt, neg, reciprocal
+//   abs         gradient sign(x), 0 at 0
+//   pow_scalar  x ^ a
+//   mul_scalar  x * a
+//   add_scalar  x + a
+//   gelu        0.5 x (1 + erf(x / sqrt 2)) (PyTorch's default GELU); gradient Phi(x) + x phi(x)
+//   softplus    log(1 + e^x), x itself above 20 (PyTorch's threshold); gradient sigmoid(x)
+// clang-format off
+#define CVD_UNARY_OPS(X) \
+  X(relu, 1)         \
+  X(clip, 1)         \
+  X(leaky_relu, 1)   \
+  X(sigmoid, 20)     \
+  X(tanh, 20)        \
+  X(exp, 20)         \
+  X(log, 20)         \
+  X(abs, 1)          \
+  X(sqrt, 4)         \
+  X(neg, 1)          \
+  X(reciprocal, 4)   \
+  X(pow_scalar, 20)  \
+  X(mul_scalar, 1)   \
+  X(add_scalar, 1)   \
+  X(gelu, 20)         \
+  X(softplus, 20)
+// clang-format on
+enum class UnaryOp : int {
+#define CVD_X(name, cost) name,
+  CVD_UNARY_OPS(CVD_X)
+#undef CVD_X
+};
+struct UnaryParams {
+  UnaryOp op = UnaryOp::relu;
+  double a = 0.0;
+  double b = 0.0;
+};
+CVD_HOST_DEVICE int64_t unary_cost(UnaryOp op) {
+  switch (op) {
+#define CVD_X(name, cost) \
+  case UnaryOp::name:     \
+    return cost;
+    CVD_UNARY_OPS(CVD_X)
+#undef CVD_X
+  }
+  return 1;
+}
+
+// The binary ops (broadcasting); the comparisons gt..eq produce 1 or 0 and are not
+// differentiable.
+#define CVD_BINARY_OPS(X) \
+  X(add) X(sub) X(mul) X(div) X(minimum) X(maximum) X(gt) X(ge) X(lt) X(le) X(eq)
+enum class BinaryOp : int {
+#define CVD_X(name) name,
+  CVD_BINARY_OPS(CVD_X)
+#undef CVD_X
+};
+struct BinaryParams {
+  BinaryOp op = BinaryOp::add;
+};
+
 template <class T>
 CVD_HOST_DEVICE T unary_forward(UnaryOp op, T x, T a, T b) {
-  using std::erf, std::exp, std::log, std::pow, std::sqrt, std::tanh;  // float overloads
+  using std::erf, std::exp, std::log, std::log1p, std::pow, std::sqrt,
+      std::tanh;  // float overloads
   switch (op) {
     case UnaryOp::relu:
       return x > T(0) ? x : T(0);
@@ -47,6 +115,8 @@ CVD_HOST_DEVICE T unary_forward(UnaryOp op, T x, T a, T b) {
       return x + a;
     case UnaryOp::gelu:
       return T(0.5) * x * (T(1) + erf(x * T(0.70710678118654752440)));
+    case UnaryOp::softplus:
+      return x > T(20) ? x : log1p(exp(x));
   }
   return x;
 }
@@ -64,6 +134,7 @@ CVD_HOST_DEVICE UnaryOperands unary_backward_reads(UnaryOp op) {
     case UnaryOp::abs:
     case UnaryOp::pow_scalar:
     case UnaryOp::gelu:
+    case UnaryOp::softplus:
       return {true, false};
     case UnaryOp::relu:
     case UnaryOp::clip:
@@ -118,6 +189,8 @@ CVD_HOST_DEVICE T unary_backward(UnaryOp op, T gy, T x, T y, T a, T b) {
     case UnaryOp::gelu:  // Phi(x) + x phi(x)
       return gy * (T(0.5) * (T(1) + erf(x * T(0.70710678118654752440))) +
                    x * T(0.39894228040143267794) * exp(T(-0.5) * x * x));
+    case UnaryOp::softplus:
+      return x > T(20) ? gy : gy / (T(1) + exp(-x));
   }
   return gy;
 }
@@ -149,118 +222,6 @@ CVD_HOST_DEVICE T binary_forward(BinaryOp op, T x, T y) {
       return x == y ? T(1) : T(0);
   }
   return x;
-}
-
-// Source coordinate for resizing (see UpsampleParams).
-template <class T>
-CVD_HOST_DEVICE T resize_source_coord(long o, long in, long out, bool align_corners) {
-  if (align_corners) return out > 1 ? T(o) * T(in - 1) / T(out - 1) : T(0);
-  T s = (T(o) + T(0.5)) * T(in) / T(out) - T(0.5);
-  return s < T(0) ? T(0) : s;
-}
-
-// grid_sample: normalised [-1, 1] coordinate to pixel coordinate, and its derivative.
-template <class T>
-CVD_HOST_DEVICE T grid_unnormalize(T g, long size, bool align_corners) {
-  return align_corners ? (g + T(1)) / T(2) * T(size - 1) : ((g + T(1)) * T(size) - T(1)) / T(2);
-}
-template <class T>
-CVD_HOST_DEVICE T grid_unnormalize_scale(long size, bool align_corners) {
-  return align_corners ? T(size - 1) / T(2) : T(size) / T(2);
-}
-
-// ---- Resampling taps (PyTorch semantics), shared by the resize and grid_sample kernels ---------
-
-// PyTorch "nearest" source index: floor(o * scale) with scale = in / out rounded to float, as
-// PyTorch computes it (so in 2, out 82, o 41 gives 0 where exact arithmetic gives 1); o itself
-// when out == in, o / 2 when out == 2 * in; clamped to in - 1.
-CVD_HOST_DEVICE long nearest_source_index(long o, long in, long out) {
-  if (out == in) return o;
-  if (out == 2 * in) return o >> 1;
-  const float scale = static_cast<float>(in) / static_cast<float>(out);
-  const long i = static_cast<long>(floorf(static_cast<float>(o) * scale));
-  return i < in - 1 ? i : in - 1;
-}
-
-// The two source taps of output index o along one axis of a bilinear resize (PyTorch
-// upsample_bilinear2d): i0 = floor(src) clamped to in - 1, i1 = i0 + 1 clamped to in - 1, and
-// their weights w0 = 1 - w1, w1 = src - i0 clamped to [0, 1].
-template <class T>
-struct LinearResizeTaps {
-  long i0, i1;
-  T w0, w1;
-};
-template <class T>
-CVD_HOST_DEVICE LinearResizeTaps<T> resize_linear_taps(long o, long in, long out,
-                                                       bool align_corners) {
-  const T src = resize_source_coord<T>(o, in, out, align_corners);
-  long i0 = static_cast<long>(floor(src));  // src >= 0
-  if (i0 > in - 1) i0 = in - 1;
-  const long i1 = i0 < in - 1 ? i0 + 1 : i0;
-  T w1 = src - T(i0);
-  w1 = w1 < T(0) ? T(0) : (w1 > T(1) ? T(1) : w1);
-  return {i0, i1, T(1) - w1, w1};
-}
-
-// The four source taps of output index o along one axis of a bicubic resize (PyTorch
-// upsample_bicubic2d, A = -0.75): indices floor(src) - 1 .. floor(src) + 2 clamped to [0, in - 1]
-// and their weights. src = o * (in - 1) / (out - 1) with align_corners, else (o + 0.5) / scale -
-// 0.5 with scale = the given scale factor when > 0, else out / in; not clamped at 0 (PyTorch's
-// cubic source index).
-template <class T>
-CVD_HOST_DEVICE T cubic_convolution1(T x, T A) {  // |x| <= 1
-  return ((A + T(2)) * x - (A + T(3))) * x * x + T(1);
-}
-template <class T>
-CVD_HOST_DEVICE T cubic_convolution2(T x, T A) {  // 1 < |x| < 2
-  return ((A * x - T(5) * A) * x + T(8) * A) * x - T(4) * A;
-}
-template <class T>
-struct CubicResizeTaps {
-  long i[4];
-  T w[4];
-};
-template <class T>
-CVD_HOST_DEVICE CubicResizeTaps<T> resize_cubic_taps(long o, long in, long out, bool align_corners,
-                                                     double scale) {
-  T src;
-  if (align_corners)
-    src = out > 1 ? T(o) * T(in - 1) / T(out - 1) : T(0);
-  else
-    src = (T(o) + T(0.5)) * (scale > 0 ? T(1.0 / scale) : T(in) / T(out)) - T(0.5);
-  const T f = floor(src);
-  const T t = src - f;
-  const T A = T(-0.75);
-  CubicResizeTaps<T> taps;
-  taps.w[0] = cubic_convolution2<T>(t + T(1), A);
-  taps.w[1] = cubic_convolution1<T>(t, A);
-  taps.w[2] = cubic_convolution1<T>(T(1) - t, A);
-  taps.w[3] = cubic_convolution2<T>(T(2) - t, A);
-  const long base = static_cast<long>(f) - 1;
-  for (int k = 0; k < 4; ++k) {
-    const long idx = base + k;
-    taps.i[k] = idx < 0 ? 0 : (idx > in - 1 ? in - 1 : idx);
-  }
-  return taps;
-}
-
-// grid_sample source pixel coordinate of the normalised value g along an axis of `size` pixels
-// (PyTorch grid_sampler_compute_source_index), and d(coordinate)/dg in *dcoord. Border padding
-// clips to [0, size - 1]; as in PyTorch (clip_coordinates_set_grad) the gradient is 0 at and
-// beyond the clip limits (coordinate <= 0 or >= size - 1).
-template <class T>
-CVD_HOST_DEVICE T grid_source_coord(T g, long size, GridPadding padding, bool align_corners,
-                                    T* dcoord) {
-  const T c = grid_unnormalize<T>(g, size, align_corners);
-  const T d = grid_unnormalize_scale<T>(size, align_corners);
-  if (padding != GridPadding::border) {
-    *dcoord = d;
-    return c;
-  }
-  const T hi = T(size - 1);
-  const bool below = c <= T(0), above = c >= hi;  // selects, no branches: vectorisable
-  *dcoord = (below | above) ? T(0) : d;
-  return below ? T(0) : (above ? hi : c);
 }
 
 // ---- Optimiser steps, one element (PyTorch torch.optim semantics, see kernel_params.h) ---------

@@ -1,59 +1,16 @@
 // Parameter structs of the kernels in the dispatch table (engine/dispatch.h). Shared by the op
-// layer, every backend and the tests. Element-wise math shared by CPU and CUDA is in
-// engine/elementwise_math.h.
+// layer, every backend and the tests. The element-wise ops (UnaryOp, BinaryOp, their parameters
+// and math) are in engine/elementwise_math.h; resampling coordinates in engine/resample_math.h.
 #pragma once
 #include <cstdint>
 #include <vector>
+
+#include "engine/elementwise_math.h"
 
 namespace cvd {
 
 struct FillParams {
   double value = 0.0;
-};
-
-// The unary ops, one X(name) each (the enum, op names and the CPU kernels' compile-time switch
-// are generated from this list):
-//   relu        max(x, 0)
-//   clip        min(max(x, a), b) (relu6 = clip 0..6); gradient 1 strictly inside (a, b)
-//   leaky_relu  x > 0 ? x : a * x
-//   sigmoid, tanh, exp, log, sqrt, neg, reciprocal
-//   abs         gradient sign(x), 0 at 0
-//   pow_scalar  x ^ a
-//   mul_scalar  x * a
-//   add_scalar  x + a
-//   gelu        0.5 x (1 + erf(x / sqrt 2)) (PyTorch's default GELU); gradient Phi(x) + x phi(x)
-#define CVD_UNARY_OPS(X)                                                                           \
-  X(relu)                                                                                          \
-  X(clip)                                                                                          \
-  X(leaky_relu) X(sigmoid) X(tanh) X(exp) X(log) X(abs) X(sqrt) X(neg) X(reciprocal) X(pow_scalar) \
-      X(mul_scalar) X(add_scalar) X(gelu)
-enum class UnaryOp : int {
-#define CVD_X(name) name,
-  CVD_UNARY_OPS(CVD_X)
-#undef CVD_X
-};
-struct UnaryParams {
-  UnaryOp op = UnaryOp::relu;
-  double a = 0.0;
-  double b = 0.0;
-};
-
-enum class BinaryOp : int {
-  add,
-  sub,
-  mul,
-  div,
-  minimum,
-  maximum,
-  // comparisons produce 1 or 0 and are not differentiable
-  gt,
-  ge,
-  lt,
-  le,
-  eq,
-};
-struct BinaryParams {
-  BinaryOp op = BinaryOp::add;
 };
 
 // Sums x over `dims` (sorted, unique, non-negative). Output has the reduced dims removed.

@@ -11,24 +11,34 @@
 namespace cvd {
 
 // ---- Element-wise, unary -------------------------------------------------------------------
-Tensor relu(const Tensor& x);
-Tensor relu6(const Tensor& x);
-Tensor clamp(const Tensor& x, double lo, double hi);
-Tensor leaky_relu(const Tensor& x, double negative_slope = 0.01);
-Tensor sigmoid(const Tensor& x);
-Tensor tanh(const Tensor& x);
-Tensor exp(const Tensor& x);
-Tensor log(const Tensor& x);
-Tensor abs(const Tensor& x);
-Tensor sqrt(const Tensor& x);
-Tensor neg(const Tensor& x);
-Tensor reciprocal(const Tensor& x);
-Tensor pow(const Tensor& x, double exponent);
-Tensor square(const Tensor& x);
-Tensor add_scalar(const Tensor& x, double s);
-Tensor mul_scalar(const Tensor& x, double s);
-Tensor gelu(const Tensor& x);  // erf form (PyTorch's default)
+// Any op of engine/elementwise_math.h's list with its parameters; the named functions below are
+// that call with the op's parameters spelled out.
 Tensor unary(const Tensor& x, const UnaryParams& p);
+inline Tensor relu(const Tensor& x) { return unary(x, {UnaryOp::relu}); }
+inline Tensor relu6(const Tensor& x) { return unary(x, {UnaryOp::clip, 0.0, 6.0}); }
+inline Tensor clamp(const Tensor& x, double lo, double hi) {
+  return unary(x, {UnaryOp::clip, lo, hi});
+}
+inline Tensor leaky_relu(const Tensor& x, double negative_slope = 0.01) {
+  return unary(x, {UnaryOp::leaky_relu, negative_slope});
+}
+inline Tensor sigmoid(const Tensor& x) { return unary(x, {UnaryOp::sigmoid}); }
+inline Tensor tanh(const Tensor& x) { return unary(x, {UnaryOp::tanh}); }
+inline Tensor exp(const Tensor& x) { return unary(x, {UnaryOp::exp}); }
+inline Tensor log(const Tensor& x) { return unary(x, {UnaryOp::log}); }
+inline Tensor abs(const Tensor& x) { return unary(x, {UnaryOp::abs}); }
+inline Tensor sqrt(const Tensor& x) { return unary(x, {UnaryOp::sqrt}); }
+inline Tensor neg(const Tensor& x) { return unary(x, {UnaryOp::neg}); }
+inline Tensor reciprocal(const Tensor& x) { return unary(x, {UnaryOp::reciprocal}); }
+inline Tensor pow(const Tensor& x, double exponent) {
+  return unary(x, {UnaryOp::pow_scalar, exponent});
+}
+inline Tensor square(const Tensor& x) { return unary(x, {UnaryOp::pow_scalar, 2.0}); }
+inline Tensor add_scalar(const Tensor& x, double s) { return unary(x, {UnaryOp::add_scalar, s}); }
+inline Tensor mul_scalar(const Tensor& x, double s) { return unary(x, {UnaryOp::mul_scalar, s}); }
+// gelu: the erf form (PyTorch's default); softplus: log(1 + e^x)
+inline Tensor gelu(const Tensor& x) { return unary(x, {UnaryOp::gelu}); }
+inline Tensor softplus(const Tensor& x) { return unary(x, {UnaryOp::softplus}); }
 
 // ---- Element-wise, binary with NumPy broadcasting -------------------------------------------
 Tensor add(const Tensor& a, const Tensor& b);

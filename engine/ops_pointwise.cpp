@@ -9,8 +9,8 @@ using detail::empty_like_kind;
 
 static const char* unary_name(UnaryOp op) {
   switch (op) {
-#define CVD_X(name)   \
-  case UnaryOp::name: \
+#define CVD_X(name, cost) \
+  case UnaryOp::name:     \
     return #name;
     CVD_UNARY_OPS(CVD_X)
 #undef CVD_X
@@ -36,24 +36,6 @@ Tensor unary(const Tensor& x_in, const UnaryParams& p) {
                   return std::vector<Tensor>{gx};
                 });
 }
-
-Tensor relu(const Tensor& x) { return unary(x, {UnaryOp::relu}); }
-Tensor relu6(const Tensor& x) { return unary(x, {UnaryOp::clip, 0.0, 6.0}); }
-Tensor clamp(const Tensor& x, double lo, double hi) { return unary(x, {UnaryOp::clip, lo, hi}); }
-Tensor leaky_relu(const Tensor& x, double s) { return unary(x, {UnaryOp::leaky_relu, s}); }
-Tensor sigmoid(const Tensor& x) { return unary(x, {UnaryOp::sigmoid}); }
-Tensor tanh(const Tensor& x) { return unary(x, {UnaryOp::tanh}); }
-Tensor exp(const Tensor& x) { return unary(x, {UnaryOp::exp}); }
-Tensor log(const Tensor& x) { return unary(x, {UnaryOp::log}); }
-Tensor abs(const Tensor& x) { return unary(x, {UnaryOp::abs}); }
-Tensor sqrt(const Tensor& x) { return unary(x, {UnaryOp::sqrt}); }
-Tensor neg(const Tensor& x) { return unary(x, {UnaryOp::neg}); }
-Tensor reciprocal(const Tensor& x) { return unary(x, {UnaryOp::reciprocal}); }
-Tensor pow(const Tensor& x, double e) { return unary(x, {UnaryOp::pow_scalar, e}); }
-Tensor square(const Tensor& x) { return unary(x, {UnaryOp::pow_scalar, 2.0}); }
-Tensor add_scalar(const Tensor& x, double s) { return unary(x, {UnaryOp::add_scalar, s}); }
-Tensor mul_scalar(const Tensor& x, double s) { return unary(x, {UnaryOp::mul_scalar, s}); }
-Tensor gelu(const Tensor& x) { return unary(x, {UnaryOp::gelu}); }
 
 Shape broadcast_shapes(const Shape& a, const Shape& b) {
   size_t n = std::max(a.size(), b.size());

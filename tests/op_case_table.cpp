@@ -96,6 +96,7 @@ std::vector<OpCase> all_op_cases() {
   c.push_back(unary_case("pow", Init::positive, [](auto& x) { return pow(x, 1.7); }));
   c.push_back(unary_case("mul_add_scalar", Init::normal, [](auto& x) { return x * 2.5 + 1.0; }));
   c.push_back(unary_case("gelu", Init::normal, [](auto& x) { return gelu(x * 2.0); }));
+  c.push_back(unary_case("softplus", Init::normal, [](auto& x) { return softplus(x * 3.0); }));
   // ---- binary, with broadcasting ----
   auto bin = [&](const std::string& n, Shape a, Shape b, Init ib,
                  std::function<Tensor(const Tensor&, const Tensor&)> f) {

@@ -1,6 +1,6 @@
 // OpenMP f32 kernels of bilinear grid_sample (PyTorch semantics: zeros or border padding, both
 // align_corners modes), forward and backward. The coordinate math is the shared
-// engine/elementwise_math.h (grid_source_coord); corner weights follow PyTorch's expressions.
+// engine/resample_math.h (grid_source_coord); corner weights follow PyTorch's expressions.
 // Work is done in chunks of grid points: the taps of a chunk (4 clamped offsets, weights and
 // in-image masks, structure of arrays) are computed once and reused for every channel.
 //   forward: parallel over (image, chunk of points), all channels per task.
@@ -15,7 +15,7 @@
 #include <memory>
 #include <vector>
 
-#include "engine/elementwise_math.h"
+#include "engine/resample_math.h"
 #include "kernels/cpu/cpu_openmp_families.h"
 #include "kernels/cpu/cpu_parallel.h"
 

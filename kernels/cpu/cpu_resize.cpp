@@ -1,6 +1,6 @@
 // OpenMP f32 kernels of the 2-D resizes (PyTorch semantics, any output size): bilinear (both
 // align_corners modes), bicubic and nearest, forward and backward. The per-axis taps come from the shared
-// engine/elementwise_math.h and are computed once per call; bilinear source coordinates are
+// engine/resample_math.h and are computed once per call; bilinear source coordinates are
 // computed in double (free, and it keeps large resizes within f32 rounding of the exact result,
 // where a float coordinate of ~150 px is already off by ~1e-5 px).
 // Forward: parallel over output rows of all planes.
@@ -11,7 +11,7 @@
 #include <cstring>
 #include <vector>
 
-#include "engine/elementwise_math.h"
+#include "engine/resample_math.h"
 #include "kernels/cpu/cpu_openmp_families.h"
 #include "kernels/cpu/cpu_parallel.h"
 

@@ -1,6 +1,6 @@
 // CUDA kernel bodies and op drivers of resampling: bilinear resize (both align_corners modes),
 // bicubic and nearest resize, forward and backward, and bilinear grid_sample (zeros / border padding),
-// forward and backward. PyTorch semantics; the taps are engine/elementwise_math.h, shared with
+// forward and backward. PyTorch semantics; the taps are engine/resample_math.h, shared with
 // the CPU kernels. The resize backward kernels are gathers (one thread per input pixel visits the
 // output pixels whose taps reach it), so they need no atomics and are deterministic; the
 // grid_sample backward scatters into gx with atomic_add (grid positions are arbitrary).
@@ -9,6 +9,7 @@
 
 #include "engine/dispatch.h"
 #include "engine/kernel_params.h"
+#include "engine/resample_math.h"
 #include "kernels/cuda/launch_body.h"
 
 namespace cvd::cuda {

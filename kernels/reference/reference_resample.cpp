@@ -4,8 +4,8 @@
 #include <algorithm>
 #include <cmath>
 
-#include "engine/elementwise_math.h"
 #include "engine/kernel_params.h"
+#include "engine/resample_math.h"
 #include "kernels/reference/reference_access.h"
 #include "kernels/reference/reference_kernels.h"
 

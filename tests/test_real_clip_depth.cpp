@@ -6,7 +6,7 @@
 //     own network before training;
 //   - the ground-truth poses (adjusted on flow tracks, `--given-poses adjusted`) end no worse than
 //     estimated cameras (the flow's, and COLMAP's when it is on PATH), within 0.01.
-// Slow (a few minutes); skipped, saying why, without the shared data. The full-size figures are in
+// Slow (minutes); skipped, saying why, without the shared data. The full-size figures are in
 // the README (bench/eval_7scenes.sh).
 #include <gtest/gtest.h>
 
@@ -42,6 +42,8 @@ double video_abs_rel(const fs::path& metrics) {
 
 // One `cvd run` of the clip cut into `out` with `flags` (and `training`: 4 epochs after a 60-step
 // warm-up unless given), then `cvd eval` of its depth before training.
+// One OpenMP thread per run: ctest runs two tests side by side on CI's two cores, where two
+// runs of two spinning OpenMP teams took this test 4x as long as alone (819 s against 205 s).
 Scores run_clip(const fs::path& data, const fs::path& out, const std::string& flags,
                 const std::string& training = "--epochs 4 --warmup 60") {
   const std::string common = fmt::format(
@@ -49,7 +51,7 @@ Scores run_clip(const fs::path& data, const fs::path& out, const std::string& fl
       "--intrinsics 525,525,320,240 --no-videos --no-ply --gt {}",
       training, shell_quoted(data));
   const CommandResult r =
-      run_command(fmt::format("{} --quiet run {} -o {} {} {}", cli_path(),
+      run_command(fmt::format("OMP_NUM_THREADS=1 {} --quiet run {} -o {} {} {}", cli_path(),
                               shell_quoted(data / "rgb"), shell_quoted(out), common, flags));
   EXPECT_EQ(r.exit_code, 0) << r.output;
   const CommandResult e = run_command(fmt::format(

@@ -196,6 +196,22 @@ SceneGroundTruth generated_clip(const fs::path& dir, int frames) {
   return read_scene_ground_truth(dir);
 }
 
+// A generated clip's frame names, true poses and path length (sum of the centre steps).
+struct ClipFrames {
+  std::vector<std::string> names;
+  std::vector<Pose> poses;
+  double path = 0;
+};
+ClipFrames frames_of(const SceneGroundTruth& gt) {
+  ClipFrames c;
+  for (const auto& f : gt.frames) {
+    c.names.push_back(f.name);
+    c.poses.push_back(f.pose);
+  }
+  for (size_t k = 1; k < c.poses.size(); ++k) c.path += (c.poses[k].t - c.poses[k - 1].t).norm();
+  return c;
+}
+
 std::vector<Pose> poses_of(const std::vector<NamedCamera>& cams) {
   std::vector<Pose> p;
   for (const auto& c : cams) p.push_back(c.pose);
@@ -207,18 +223,14 @@ std::vector<Pose> poses_of(const std::vector<NamedCamera>& cams) {
 TEST(FlowPoses, GeneratedSceneCamerasAndFocalFromFlowAlone) {
   test::TempDir dir;
   const SceneGroundTruth gt = generated_clip(dir.path(), 24);
-  std::vector<std::string> names;
-  std::vector<Pose> gt_poses;
-  for (const auto& f : gt.frames) {
-    names.push_back(f.name);
-    gt_poses.push_back(f.pose);
-  }
+  const ClipFrames clip = frames_of(gt);
+  const std::vector<std::string>& names = clip.names;
+  const std::vector<Pose>& gt_poses = clip.poses;
+  const double path = clip.path;
   auto frame = [&](size_t k) { return cv::imread(gt.frames[k].rgb_path.string()); };
   FlowPoseOptions o;
   o.max_tracks = 4000;
   o.candidate_tracks = 1500;
-  double path = 0;
-  for (size_t k = 1; k < gt_poses.size(); ++k) path += (gt_poses[k].t - gt_poses[k - 1].t).norm();
 
   // Known intrinsics.
   const FlowPoseResult known = estimate_flow_poses(names, frame, nullptr, gt.intrinsics, o);
@@ -296,14 +308,10 @@ TEST(FlowPoses, RunWithoutColmapFallsBackToTheFlowWithAWarning) {
 TEST(FlowPoses, AdjustedStartRecoversPerturbedCamerasInTheirUnits) {
   test::TempDir dir;
   const SceneGroundTruth gt = generated_clip(dir.path(), 24);
-  std::vector<std::string> names;
-  std::vector<Pose> gt_poses;
-  for (const auto& f : gt.frames) {
-    names.push_back(f.name);
-    gt_poses.push_back(f.pose);
-  }
-  double path = 0;
-  for (size_t k = 1; k < gt_poses.size(); ++k) path += (gt_poses[k].t - gt_poses[k - 1].t).norm();
+  const ClipFrames clip = frames_of(gt);
+  const std::vector<std::string>& names = clip.names;
+  const std::vector<Pose>& gt_poses = clip.poses;
+  const double path = clip.path;
   const double units = 2.5;  // the given poses' units: 2.5 per scene metre
   const size_t dropped = 7;  // given as unregistered
   std::mt19937 rng(11);

@@ -223,10 +223,7 @@ std::vector<Pose> poses_of(const std::vector<NamedCamera>& cams) {
 TEST(FlowPoses, GeneratedSceneCamerasAndFocalFromFlowAlone) {
   test::TempDir dir;
   const SceneGroundTruth gt = generated_clip(dir.path(), 24);
-  const ClipFrames clip = frames_of(gt);
-  const std::vector<std::string>& names = clip.names;
-  const std::vector<Pose>& gt_poses = clip.poses;
-  const double path = clip.path;
+  const auto& [names, gt_poses, path] = frames_of(gt);
   auto frame = [&](size_t k) { return cv::imread(gt.frames[k].rgb_path.string()); };
   FlowPoseOptions o;
   o.max_tracks = 4000;
@@ -308,10 +305,7 @@ TEST(FlowPoses, RunWithoutColmapFallsBackToTheFlowWithAWarning) {
 TEST(FlowPoses, AdjustedStartRecoversPerturbedCamerasInTheirUnits) {
   test::TempDir dir;
   const SceneGroundTruth gt = generated_clip(dir.path(), 24);
-  const ClipFrames clip = frames_of(gt);
-  const std::vector<std::string>& names = clip.names;
-  const std::vector<Pose>& gt_poses = clip.poses;
-  const double path = clip.path;
+  const auto& [names, gt_poses, path] = frames_of(gt);
   const double units = 2.5;  // the given poses' units: 2.5 per scene metre
   const size_t dropped = 7;  // given as unregistered
   std::mt19937 rng(11);

@@ -3,11 +3,11 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
-#include <cmath>
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "pipeline/eval/eval_pose_metrics.h"
 #include "pipeline/io/atomic_file.h"
 #include "pipeline/io/trajectory_io.h"
 #include "pipeline/poses/flow_poses.h"
@@ -26,8 +26,7 @@ json camera_change(const std::vector<NamedCamera>& from, const std::vector<Named
   int n = 0;
   for (size_t k = 0; k < from.size() && k < to.size(); ++k) {
     if (!from[k].registered || !to[k].registered) continue;
-    const Eigen::Matrix3d d = from[k].pose.R.transpose() * to[k].pose.R;
-    const double angle = std::acos(std::clamp(0.5 * (d.trace() - 1.0), -1.0, 1.0)) * 180.0 / M_PI;
+    const double angle = rotation_angle_deg(from[k].pose.R.transpose() * to[k].pose.R);
     const double move = (to[k].pose.t - from[k].pose.t).norm();
     rot_sum += angle;
     rot_max = std::max(rot_max, angle);

@@ -1,6 +1,6 @@
 #!/bin/bash
 # The CUDA checks on a GPU machine, from the folder scripts/cuda-device-bundle.sh makes: the op
-# table (tests/test_cuda_ops.cpp), compute-sanitizer memcheck over it, and the CUDA op timings
+# and kernel tables (tests/test_cuda_ops.cpp), compute-sanitizer memcheck over it, and the CUDA op timings
 # (bench/bench_cuda_ops.cpp) next to PyTorch (tools/reference/bench_cuda_ops_torch.py) on the same
 # GPU. Writes its logs under $OUT (default ./cuda-check-out).
 cd "$(dirname "$0")"
@@ -21,6 +21,8 @@ timeout 200 ./bench_cuda_ops --min-seconds 0.2 2>&1 | tee $OUT/bench_ours.jsonl
 echo "=== bench_op_table (the op table's perf mode, every backend)"
 OMP_NUM_THREADS=8 timeout 120 ./bench_op_table --min-seconds 0.02 > $OUT/op_table_perf.jsonl 2>&1; echo "rc=$?"
 grep cuda_f32 $OUT/op_table_perf.jsonl | head -3
+OMP_NUM_THREADS=8 timeout 120 ./bench_op_table --kernels --min-seconds 0.01 > $OUT/kernel_table_perf.jsonl 2>&1; echo "kernels rc=$?"
+grep cuda_f32 $OUT/kernel_table_perf.jsonl | head -3
 echo "=== torch"
 PYTHONUNBUFFERED=1 timeout 150 python3 bench_cuda_ops_torch.py --min-seconds 0.2 2>&1 | tee $OUT/bench_torch.jsonl | tail -14
 python3 -c "import torch;print('torch',torch.__version__,'cudnn',torch.backends.cudnn.version())"

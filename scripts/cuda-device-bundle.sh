@@ -1,6 +1,6 @@
 #!/bin/bash
 # Packs what a GPU machine without this project's Debian packages needs to run the CUDA checks:
-# test_cuda_ops, bench_cuda_ops and bench_op_table (the op table's perf mode) linked with
+# test_cuda_ops, bench_cuda_ops and bench_op_table (the op and kernel tables' perf mode) linked with
 # --as-needed against the engine and kernel layers only (no OpenCV / ffmpeg / Ceres), the shared
 # libraries they load (oneDNN xz-compressed), the PyTorch reference script and
 # bench/cuda_device_check.sh. ~22 MiB.
@@ -14,7 +14,8 @@ src=$(cd "$(dirname "$0")/.." && pwd)
 grep -q "CVD_WITH_CUDA" "$build/build.ninja" || { echo "$build: not a CUDA build" >&2; exit 1; }
 rm -rf "$out" && mkdir -p "$out/obj"
 flags="-O2 -DNDEBUG -std=gnu++17 -fopenmp -I$src -I$src/include -DCVD_WITH_CUDA=1 -I/usr/local/cuda/include"
-for s in tests/gtest_main tests/op_case_table tests/op_case_run tests/test_cuda_ops \
+for s in tests/gtest_main tests/op_case_table tests/op_case_run tests/kernel_case_run \
+  tests/kernel_cases_elementwise tests/kernel_cases_spatial tests/test_cuda_ops \
   bench/bench_cuda_ops bench/bench_op_table; do
   g++ $flags -c "$src/$s.cpp" -o "$out/obj/$(basename $s).o"
 done
@@ -23,11 +24,12 @@ libs=("$build"/kernels/libcvd_kernels.a "$build"/kernels/libcvd_kernels_referenc
       "$build"/engine/libcvd_engine.a -ldnnl -fopenmp /usr/local/cuda/lib/libcudart.so -ldl -lz
       -lspdlog -lfmt -lpthread '-Wl,-rpath,$ORIGIN')
 o=$out/obj
-g++ -o "$out/test_cuda_ops" $o/gtest_main.o $o/op_case_table.o $o/op_case_run.o \
-  $o/test_cuda_ops.o -Wl,--as-needed -lgtest "${libs[@]}"
+tables="$o/op_case_table.o $o/op_case_run.o $o/kernel_case_run.o $o/kernel_cases_elementwise.o
+        $o/kernel_cases_spatial.o"
+g++ -o "$out/test_cuda_ops" $o/gtest_main.o $tables $o/test_cuda_ops.o -Wl,--as-needed -lgtest \
+  "${libs[@]}"
 g++ -o "$out/bench_cuda_ops" $o/bench_cuda_ops.o -Wl,--as-needed "${libs[@]}"
-g++ -o "$out/bench_op_table" $o/bench_op_table.o $o/op_case_table.o $o/op_case_run.o \
-  -Wl,--as-needed "${libs[@]}"
+g++ -o "$out/bench_op_table" $o/bench_op_table.o $tables -Wl,--as-needed "${libs[@]}"
 rm -rf "$o"
 for l in libdnnl.so.2 libfmt.so.9 libgomp.so.1 libOpenCL.so.1 libstdc++.so.6 libz.so.1; do
   cp -L "/lib/x86_64-linux-gnu/$l" "$out/"

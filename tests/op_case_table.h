@@ -2,6 +2,7 @@
 // the shapes and parameters the models use. Adding an op to the engine = adding a line here.
 #pragma once
 #include <functional>
+#include <ostream>
 #include <string>
 #include <vector>
 
@@ -25,6 +26,9 @@ struct OpCase {
   std::function<Tensor(const std::vector<Tensor>&)> fn;
   double f32_tol = 2e-5;  // max abs error of f32 vs the f64 reference, relative to max(1, |ref|max)
 };
+
+// gtest prints a case by its name.
+inline void PrintTo(const OpCase& c, std::ostream* os) { *os << c.name; }
 
 std::vector<OpCase> all_op_cases();
 

@@ -4,6 +4,8 @@
 //    the same comparison as the CPU's (tests/op_case_run.h).
 //    The same again with every input a non-contiguous view. Skipped, with the runtime's reason,
 //    when no GPU is usable.
+//  - CudaKernelTable: every call of the kernel table (tests/kernel_case_table.h) on the device's
+//    f32 kernels against the float64 reference; skipped the same way.
 //  - CudaCoverage: in a CUDA build every op with a CPU f32 kernel has a CUDA f32 kernel; without
 //    a GPU, asking for CUDA memory is a clear Error while CPU work continues.
 #include <gtest/gtest.h>
@@ -15,6 +17,7 @@
 #include "engine/backend_info.h"
 #include "engine/dispatch.h"
 #include "engine/random.h"
+#include "tests/kernel_case_table.h"
 #include "tests/op_case_run.h"
 
 namespace cvd::test {
@@ -37,28 +40,21 @@ TEST_P(CudaOpTable, F32StridedInputsOnCudaVsReference) {
 INSTANTIATE_TEST_SUITE_P(Ops, CudaOpTable, ::testing::ValuesIn(all_op_cases()),
                          [](const ::testing::TestParamInfo<OpCase>& i) { return i.param.name; });
 
-TEST(CudaOps, MatmulShapesOnDevice) {
+// The kernel table (tests/kernel_case_table.h) on the device: each call's f32 inputs copied to
+// it with their views (strides, broadcasts, offsets) kept, against the float64 reference on the CPU.
+class CudaKernelTable : public ::testing::TestWithParam<KernelCase> {};
+
+TEST_P(CudaKernelTable, F32OnCudaVsReference) {
   if (cuda_device_count() == 0) GTEST_SKIP() << "no CUDA device: " << cuda_runtime_status();
-  Generator g(5);
-  for (bool ta : {false, true}) {
-    for (bool tb : {false, true}) {
-      const int64_t b = 3, m = 17, k = 33, n = 9;
-      const Tensor a64 = Tensor::randn(ta ? Shape{b, k, m} : Shape{b, m, k}, g, DType::f64);
-      const Tensor b64 = Tensor::randn(tb ? Shape{1, n, k} : Shape{1, k, n}, g, DType::f64);
-      const MatmulParams p{ta, tb};
-      const Tensor c64 = Tensor::empty({b, m, n}, DType::f64);
-      dispatch(OpId::matmul, a64, KernelArgs{{a64, b64}, {c64}, &p});
-      const Tensor ad = a64.to(DType::f32).to(DeviceId::cuda());
-      const Tensor bd = b64.to(DType::f32).to(DeviceId::cuda());
-      const Tensor cd = Tensor::empty({b, m, n}, DType::f32, DeviceId::cuda());
-      dispatch(OpId::matmul, ad, KernelArgs{{ad, bd}, {cd}, &p});
-      const std::vector<double> r = c64.to_vector(), f = cd.to_vector();
-      const double scale = std::max(1.0, max_abs(r));
-      for (size_t i = 0; i < r.size(); ++i)
-        ASSERT_NEAR(f[i], r[i], 1e-5 * scale) << "trans_a " << ta << " trans_b " << tb;
-    }
-  }
+  const KernelBackend device{"cuda", DeviceType::cuda, DeviceId::cuda(), ""};
+  for (const KernelCall& c : GetParam().calls())
+    EXPECT_EQ(compare_call_with_reference(c, device), "");
 }
+
+INSTANTIATE_TEST_SUITE_P(Kernels, CudaKernelTable, ::testing::ValuesIn(all_kernel_cases()),
+                         [](const ::testing::TestParamInfo<KernelCase>& i) {
+                           return i.param.name;
+                         });
 
 TEST(CudaCoverage, EveryCpuOpHasCudaKernelInCudaBuilds) {
   const KernelRegistry& r = kernel_registry();

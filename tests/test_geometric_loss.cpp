@@ -9,6 +9,7 @@
 #include "engine/autograd.h"
 #include "engine/ops.h"
 #include "pipeline/training/geometric_loss.h"
+#include "pipeline/training/test_time_training.h"
 #include "tests/test_support.h"
 
 namespace cvd {
@@ -122,6 +123,20 @@ TEST(GeometricLoss, ZeroWhenDepthPosesAndFlowAgree) {
   GeometricLoss wrong = geometric_loss_pair(mul_scalar(d, 1.5), d, ij, ji, {});
   EXPECT_GT(wrong.spatial.item(), 0.15);  // one direction off by 1/3 px, the other exact
   EXPECT_GT(wrong.disparity.item(), 0.5);
+}
+
+// The before / after loss of a run is evaluated on every pair up to the cap and on evenly spaced
+// pairs beyond it: the first pair, strictly increasing, spread over the whole list.
+TEST(GeometricLoss, EvaluationPairsEvenlySpacedBeyondTheCap) {
+  EXPECT_EQ(loss_evaluation_pairs(5, 256), (std::vector<size_t>{0, 1, 2, 3, 4}));
+  EXPECT_EQ(loss_evaluation_pairs(5, 0), (std::vector<size_t>{0, 1, 2, 3, 4}));
+  EXPECT_TRUE(loss_evaluation_pairs(0, 256).empty());
+  EXPECT_EQ(loss_evaluation_pairs(10, 4), (std::vector<size_t>{0, 2, 5, 7}));
+  const std::vector<size_t> c = loss_evaluation_pairs(5977, 256);
+  ASSERT_EQ(c.size(), 256u);
+  EXPECT_EQ(c.front(), 0u);
+  EXPECT_GE(c.back() + (5977u + 255u) / 256u, 5977u);  // within one spacing of the end
+  for (size_t i = 1; i < c.size(); ++i) EXPECT_GT(c[i], c[i - 1]);
 }
 
 }  // namespace

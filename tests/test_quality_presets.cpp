@@ -60,6 +60,12 @@ TEST(QualityPreset, CliAppliesThePresetToTheKnobsNotGiven) {
       << info["network"];
   // run.json also says what the run cost: per-stage times and peak memory.
   EXPECT_GT(info["timings_s"]["total"].get<double>(), 0.0);
+  EXPECT_GT(info["timings_s"]["loss_evaluation"].get<double>(), 0.0);
+  EXPECT_LE(info["timings_s"]["training"].get<double>() +
+                info["timings_s"]["loss_evaluation"].get<double>(),
+            info["timings_s"]["total"].get<double>());
+  EXPECT_EQ(info["training"]["geometric_loss_pairs"].get<int>(), info["pairs"]["kept"].get<int>())
+      << "fewer pairs than the cap: the loss is evaluated on all of them";
   EXPECT_GT(info["peak_rss_mb"]["process"].get<double>(), 10.0) << info["peak_rss_mb"];
   EXPECT_LT(info["peak_rss_mb"]["process"].get<double>(), 4096.0) << info["peak_rss_mb"];
 }

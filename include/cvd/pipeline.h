@@ -127,6 +127,8 @@ struct PipelineResult {
   CameraIntrinsics depth_intrinsics;  ///< intrinsics of the depth maps' resolution
   int num_pairs = 0, num_pairs_dropped = 0;
   std::vector<double> epoch_losses;
+  /// Mean geometric loss before and after training, over every pair up to 256 pairs and over 256
+  /// evenly spaced pairs beyond (run.json -> training.geometric_loss_pairs).
   double initial_loss = 0, final_loss = 0;
   std::string metrics_json;   ///< evaluation (when gt was given), JSON text
   std::string run_info_json;  ///< what OUT/run.json holds (OUT = PipelineOptions::out), JSON text

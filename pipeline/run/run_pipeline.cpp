@@ -207,7 +207,9 @@ RunResult run_pipeline(const RunOptions& o) {
   t = Clock::now();
   const TrainingStage tr = run_training_stage(o, *net, load_frame, flow, usable, poses.source,
                                               precision, cams, dsize, cache);
-  timings["training"] = since(t);
+  // The training steps alone; the loss before and after, evaluated on a fixed set of pairs, apart.
+  timings["training"] = since(t) - tr.loss_evaluation_s;
+  timings["loss_evaluation"] = tr.loss_evaluation_s;
   RunResult res;
   res.initial_loss = tr.initial_loss;
   res.final_loss = tr.final_loss;
@@ -312,7 +314,8 @@ RunResult run_pipeline(const RunOptions& o) {
                       {"skipped_steps", tr.result.skipped_steps},
                       {"resumed_from_epoch", tr.result.resumed_from_epoch},
                       {"geometric_loss_before", res.initial_loss},
-                      {"geometric_loss_after", res.final_loss}};
+                      {"geometric_loss_after", res.final_loss},
+                      {"geometric_loss_pairs", tr.loss_pairs}};
   info["timings_s"] = timings;
   // Peak resident memory of this process and of the largest subprocess (COLMAP, ffmpeg) so far;
   // a resumed run reports its own.

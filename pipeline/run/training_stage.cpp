@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <chrono>
 #include <memory>
 
 #include "engine/error.h"
@@ -88,13 +89,23 @@ TrainingStage run_training_stage(const RunOptions& o, DepthNet& net,
   };
   const std::unique_ptr<CameraRefinement> refinement = camera_refinement(o, cams);
   to.cameras = refinement.get();
-  st.initial_loss = evaluate_geometric_loss(net, load_frame, pairs, to.lambda_disparity);
+  using Clock = std::chrono::steady_clock;
+  const auto seconds = [](Clock::time_point t) {
+    return std::chrono::duration<double>(Clock::now() - t).count();
+  };
+  auto t = Clock::now();
+  st.initial_loss = evaluate_geometric_loss(net, load_frame, pairs, to.lambda_disparity, nullptr,
+                                            kLossEvaluationPairs);
+  st.loss_evaluation_s = seconds(t);
   st.result = train_test_time(net, load_frame, pairs, to);
   if (o.stop_after_epochs >= 0 && static_cast<int>(st.result.epoch_losses.size()) < o.epochs)
     fail(ErrorCategory::cancelled, "stopped after epoch {} (test hook)",
          st.result.epoch_losses.size());
-  st.final_loss =
-      evaluate_geometric_loss(net, load_frame, pairs, to.lambda_disparity, refinement.get());
+  t = Clock::now();
+  st.final_loss = evaluate_geometric_loss(net, load_frame, pairs, to.lambda_disparity,
+                                          refinement.get(), kLossEvaluationPairs);
+  st.loss_evaluation_s += seconds(t);
+  st.loss_pairs = std::min(pairs.size(), kLossEvaluationPairs);
   if (refinement) {
     // The outputs carry the refined cameras.
     const std::vector<Pose> refined = refinement->poses();

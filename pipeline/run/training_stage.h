@@ -17,6 +17,10 @@
 
 namespace cvd {
 
+// Pairs the before / after loss is evaluated on: its frames' depth is one forward pass each,
+// which on long clips (2,000 frames) would cost as much as hundreds of training steps.
+inline constexpr size_t kLossEvaluationPairs = 256;
+
 struct TrainingStage {
   TrainingResult result;
   int epochs = 0;
@@ -25,9 +29,13 @@ struct TrainingStage {
   int batch_pairs = 0;
   double lr = 0, lambda = 0;
   size_t num_pairs = 0;
-  bool streamed = false;                    // pairs read from cache/flow per batch
-  double initial_loss = 0, final_loss = 0;  // geometric loss over all pairs, before and after
-  nlohmann::json refinement;                // the cameras' corrections (null without refinement)
+  bool streamed = false;  // pairs read from cache/flow per batch
+  // The geometric loss before and after training, on `loss_pairs` pairs (every pair up to
+  // kLossEvaluationPairs, that many evenly spaced beyond), and the seconds those two passes took.
+  double initial_loss = 0, final_loss = 0;
+  size_t loss_pairs = 0;
+  double loss_evaluation_s = 0;
+  nlohmann::json refinement;  // the cameras' corrections (null without refinement)
 };
 
 // `cams` at the depth resolution (refined in place); `usable` the user masks (empty: none);

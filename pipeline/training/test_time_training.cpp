@@ -337,9 +337,16 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
   return result;
 }
 
+std::vector<size_t> loss_evaluation_pairs(size_t num_pairs, size_t max_pairs) {
+  const size_t m = max_pairs > 0 ? std::min(num_pairs, max_pairs) : num_pairs;
+  std::vector<size_t> chosen(m);
+  for (size_t i = 0; i < m; ++i) chosen[i] = i * num_pairs / m;  // strictly increasing
+  return chosen;
+}
+
 double evaluate_geometric_loss(DepthNet& net, const std::function<Tensor(int)>& load_frame,
                                const PairSource& pairs, double lambda_disparity,
-                               const CameraRefinement* cameras) {
+                               const CameraRefinement* cameras, size_t max_pairs) {
   NoGradGuard ng;
   bool was_training = net.is_training();
   net.eval();
@@ -347,17 +354,18 @@ double evaluate_geometric_loss(DepthNet& net, const std::function<Tensor(int)>& 
   lo.lambda_disparity = lambda_disparity;
   std::map<int, Tensor> cache;
   double sum = 0;
-  // Every R-th pair on each process, the sum over processes.
+  const std::vector<size_t> chosen = loss_evaluation_pairs(pairs.size(), max_pairs);
+  // Every R-th chosen pair on each process, the sum over processes.
   ProcessGroup& pg = process_group();
-  for (size_t k = static_cast<size_t>(pg.rank()); k < pairs.size(); k += size_t(pg.size())) {
-    const TrainingPair p = pairs.load(k);
+  for (size_t c = static_cast<size_t>(pg.rank()); c < chosen.size(); c += size_t(pg.size())) {
+    const TrainingPair p = pairs.load(chosen[c]);
     for (int f : {p.i, p.j})
       if (!cache.count(f)) cache[f] = net.depth(load_frame(f).unsqueeze(0)).squeeze(0).squeeze(0);
     sum += pair_loss(cache[p.i], cache[p.j], p, lo, cameras).item();
   }
   pg.all_reduce_sum(&sum, 1);
   net.train(was_training);
-  return pairs.size() == 0 ? 0.0 : sum / static_cast<double>(pairs.size());
+  return chosen.empty() ? 0.0 : sum / static_cast<double>(chosen.size());
 }
 
 }  // namespace cvd

@@ -63,11 +63,16 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
                                const std::vector<TrainingPair>& pairs,
                                const TrainingOptions& options);
 
-// Mean geometric loss over all pairs with the network as it is (eval mode, no gradients).
-// With `cameras`, the loss of the refined cameras.
+// Mean geometric loss with the network as it is (eval mode, no gradients), over every pair or,
+// with `max_pairs` > 0 and more pairs than that, over `max_pairs` pairs evenly spaced in the
+// pair order (the same ones on every call; each of their frames' depth computed once). With
+// `cameras`, the loss of the refined cameras.
 double evaluate_geometric_loss(DepthNet& net, const std::function<Tensor(int)>& load_frame,
                                const PairSource& pairs, double lambda_disparity,
-                               const CameraRefinement* cameras = nullptr);
+                               const CameraRefinement* cameras = nullptr, size_t max_pairs = 0);
+
+// The pairs evaluate_geometric_loss uses: all of `num_pairs`, or `max_pairs` evenly spaced.
+std::vector<size_t> loss_evaluation_pairs(size_t num_pairs, size_t max_pairs);
 double evaluate_geometric_loss(DepthNet& net, const std::function<Tensor(int)>& load_frame,
                                const std::vector<TrainingPair>& pairs, double lambda_disparity,
                                const CameraRefinement* cameras = nullptr);

@@ -129,6 +129,7 @@ FlowTrackStats triangulate_flow_tracks(const std::vector<NamedCamera>& cams,
   std::vector<bool> registered(n);
   for (size_t k = 0; k < n; ++k) registered[k] = cams[k].registered;
   FlowTrackStats stats;
+  stats.max_length = o.max_length;
   for (const PixelTrack& t : follow_flow_tracks(next_flow, next_mask, registered, o)) {
     ++stats.tracks;
     Eigen::Vector3d X;
@@ -137,6 +138,30 @@ FlowTrackStats triangulate_flow_tracks(const std::vector<NamedCamera>& cams,
     ++stats.kept;
   }
   return stats;
+}
+
+FlowTrackStats triangulate_flow_tracks_lengthening(
+    const std::vector<NamedCamera>& cams, const std::vector<cv::Mat>& next_flow,
+    const std::vector<cv::Mat>& next_mask, std::vector<std::vector<Eigen::Vector3d>>& points,
+    int min_kept, const FlowTrackOptions& options) {
+  const std::vector<std::vector<Eigen::Vector3d>> given = points;
+  FlowTrackStats best = triangulate_flow_tracks(cams, next_flow, next_mask, points, options);
+  const size_t n = cams.size();
+  for (int factor : {4, 16}) {
+    // Done when enough points, or when the last attempt's tracks could already span the clip.
+    const size_t last_length = size_t(options.max_length) * size_t(factor / 4);
+    if (best.kept >= min_kept || last_length >= n) break;
+    FlowTrackOptions o = options;
+    o.max_length = options.max_length * factor;
+    o.start_every = options.start_every * factor;
+    std::vector<std::vector<Eigen::Vector3d>> longer = given;
+    const FlowTrackStats st = triangulate_flow_tracks(cams, next_flow, next_mask, longer, o);
+    if (st.kept > best.kept) {
+      best = st;
+      points = std::move(longer);
+    }
+  }
+  return best;
 }
 
 }  // namespace cvd

@@ -43,8 +43,9 @@ std::vector<PixelTrack> follow_flow_tracks(const std::vector<cv::Mat>& next_flow
                                            const FlowTrackOptions& options);
 
 struct FlowTrackStats {
-  int tracks = 0;  // tracks of at least min_views frames
-  int kept = 0;    // triangulated and kept
+  int tracks = 0;      // tracks of at least min_views frames
+  int kept = 0;        // triangulated and kept
+  int max_length = 0;  // the longest track allowed (frames)
 };
 
 // next_flow[k] / next_mask[k]: the flow from frame k to k + 1 (CV_32FC2, pixels at the cameras'
@@ -55,5 +56,15 @@ FlowTrackStats triangulate_flow_tracks(const std::vector<NamedCamera>& cams,
                                        const std::vector<cv::Mat>& next_mask,
                                        std::vector<std::vector<Eigen::Vector3d>>& points,
                                        const FlowTrackOptions& options = {});
+
+// A slow clip (many frames to little motion: a long recording, a high frame rate) sees too little
+// parallax within options.max_length frames for any track to be kept. While fewer than
+// `min_kept` tracks are kept, this tries tracks 4x and then 16x as long, started 4x and 16x less
+// often (about the same work and memory), and keeps the points of the attempt that kept the most;
+// stats.max_length says which. Drifting long tracks fail the reprojection check like any other.
+FlowTrackStats triangulate_flow_tracks_lengthening(
+    const std::vector<NamedCamera>& cams, const std::vector<cv::Mat>& next_flow,
+    const std::vector<cv::Mat>& next_mask, std::vector<std::vector<Eigen::Vector3d>>& points,
+    int min_kept, const FlowTrackOptions& options = {});
 
 }  // namespace cvd

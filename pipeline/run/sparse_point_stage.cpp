@@ -25,9 +25,15 @@ SparsePointsStage run_sparse_points_stage(const PosesStage& poses, const FlowSta
       next_flow[size_t(p.pair.first)] = p.forward;
       next_mask[size_t(p.pair.first)] = p.forward_mask;
     }
-  const FlowTrackStats ts = triangulate_flow_tracks(cams, next_flow, next_mask, st.points);
-  st.triangulation = {{"method", "flow tracks"}, {"tracks", ts.tracks}, {"kept", ts.kept}};
-  spdlog::info("sparse points: {} of {} flow tracks triangulated", ts.kept, ts.tracks);
+  // Fewer tracks kept than frames: a slow clip; longer tracks are tried.
+  const FlowTrackStats ts = triangulate_flow_tracks_lengthening(cams, next_flow, next_mask,
+                                                                st.points, static_cast<int>(n));
+  st.triangulation = {{"method", "flow tracks"},
+                      {"tracks", ts.tracks},
+                      {"kept", ts.kept},
+                      {"max_track_length", ts.max_length}};
+  spdlog::info("sparse points: {} of {} flow tracks triangulated (tracks of up to {} frames)",
+               ts.kept, ts.tracks, ts.max_length);
   if (ts.kept == 0) {
     int kept = 0;
     for (size_t k = 0; k < flow.pairs.size(); ++k) {

@@ -37,44 +37,70 @@ void exact_flow(const SyntheticScene& s, size_t k, cv::Mat& flow, cv::Mat& mask)
     }
 }
 
+// A generated clip with its exact cameras and exact consecutive flows.
+struct ExactFlowClip {
+  SyntheticScene scene;
+  std::vector<NamedCamera> cams;
+  std::vector<cv::Mat> flows, masks;
+};
+
+ExactFlowClip exact_flow_clip(const SyntheticSceneOptions& so) {
+  ExactFlowClip c{render_synthetic_scene(so), {}, {}, {}};
+  const size_t n = c.scene.frames.size();
+  c.cams.resize(n);
+  c.flows.resize(n);
+  c.masks.resize(n);
+  for (size_t k = 0; k < n; ++k) {
+    c.cams[k].pose = c.scene.frames[k].pose;
+    c.cams[k].intrinsics = c.scene.intrinsics;
+    if (k + 1 < n) exact_flow(c.scene, k, c.flows[k], c.masks[k]);
+  }
+  return c;
+}
+
+// |depth of each point / true depth - 1| at the pixel it projects to (rounded), every frame,
+// sorted; a point projecting outside the image fails the test.
+std::vector<double> sorted_depth_errors(const ExactFlowClip& c,
+                                        const std::vector<std::vector<Eigen::Vector3d>>& points) {
+  std::vector<double> errors;
+  const Intrinsics& K = c.scene.intrinsics;
+  for (size_t k = 0; k < points.size(); ++k) {
+    const cv::Mat& depth = c.scene.frames[k].depth;
+    for (const Eigen::Vector3d& X : points[k]) {
+      const Eigen::Vector3d p = c.cams[k].pose.R.transpose() * (X - c.cams[k].pose.t);
+      const int u = int(std::lround(K.fx * p.x() / p.z() + K.cx));
+      const int v = int(std::lround(K.fy * p.y() / p.z() + K.cy));
+      EXPECT_TRUE(u >= 0 && v >= 0 && u < depth.cols && v < depth.rows) << u << ", " << v;
+      if (u < 0 || v < 0 || u >= depth.cols || v >= depth.rows) continue;
+      errors.push_back(std::abs(p.z() / depth.at<float>(v, u) - 1.0));
+    }
+  }
+  std::sort(errors.begin(), errors.end());
+  return errors;
+}
+
 TEST(FlowTracks, PointsFromExactFlowLieOnTheSurfaceAndReachMostFrames) {
   SyntheticSceneOptions so;
   so.frames = 16;
   so.width = 128;
   so.height = 80;
   so.supersampling = 1;
-  const SyntheticScene s = render_synthetic_scene(so);
-  const size_t n = s.frames.size();
-  std::vector<NamedCamera> cams(n);
-  std::vector<cv::Mat> flows(n), masks(n);
-  for (size_t k = 0; k < n; ++k) {
-    cams[k].pose = s.frames[k].pose;
-    cams[k].intrinsics = s.intrinsics;
-    if (k + 1 < n) exact_flow(s, k, flows[k], masks[k]);
-  }
+  const ExactFlowClip c = exact_flow_clip(so);
+  const size_t n = c.cams.size();
   std::vector<std::vector<Eigen::Vector3d>> points(n);
   FlowTrackOptions o;
   o.min_parallax_deg = 0.5;  // the generated clip moves little between frames
-  const FlowTrackStats st = triangulate_flow_tracks(cams, flows, masks, points, o);
+  const FlowTrackStats st = triangulate_flow_tracks(c.cams, c.flows, c.masks, points, o);
   ASSERT_GT(st.kept, 50) << st.tracks << " tracks";
   size_t frames_with_points = 0;
-  std::vector<double> errors;
-  for (size_t k = 0; k < n; ++k) {
+  for (size_t k = 0; k < n; ++k)
     if (points[k].size() >= 8) ++frames_with_points;
-    const Intrinsics& K = s.intrinsics;
-    for (const Eigen::Vector3d& X : points[k]) {
-      const Eigen::Vector3d p = cams[k].pose.R.transpose() * (X - cams[k].pose.t);
-      const int u = int(std::lround(K.fx * p.x() / p.z() + K.cx));
-      const int v = int(std::lround(K.fy * p.y() / p.z() + K.cy));
-      ASSERT_TRUE(u >= 0 && v >= 0 && u < so.width && v < so.height);
-      errors.push_back(std::abs(p.z() / s.frames[k].depth.at<float>(v, u) - 1.0));
-    }
-  }
+  EXPECT_GE(frames_with_points, n - 1);
   // Compared at the rounded pixel: exact on surfaces, off only where that pixel crosses an edge.
-  std::sort(errors.begin(), errors.end());
+  const std::vector<double> errors = sorted_depth_errors(c, points);
+  ASSERT_FALSE(errors.empty());
   EXPECT_LT(errors[errors.size() / 2], 0.005);
   EXPECT_LT(errors[errors.size() * 95 / 100], 0.03);
-  EXPECT_GE(frames_with_points, n - 1);
 }
 
 // A slow clip (the generated path over many frames, like a long recording): 16-frame tracks see
@@ -87,40 +113,24 @@ TEST(FlowTracks, SlowClipGetsPointsFromLongerTracks) {
   so.height = 40;
   so.supersampling = 1;
   so.moving_object = false;
-  const SyntheticScene s = render_synthetic_scene(so);
-  const size_t n = s.frames.size();
-  std::vector<NamedCamera> cams(n);
-  std::vector<cv::Mat> flows(n), masks(n);
-  for (size_t k = 0; k < n; ++k) {
-    cams[k].pose = s.frames[k].pose;
-    cams[k].intrinsics = s.intrinsics;
-    if (k + 1 < n) exact_flow(s, k, flows[k], masks[k]);
-  }
+  const ExactFlowClip c = exact_flow_clip(so);
+  const size_t n = c.cams.size();
   const FlowTrackOptions o;  // the run's defaults: 16 frames, 1.5 degrees
   std::vector<std::vector<Eigen::Vector3d>> short_points(n), points(n);
-  const FlowTrackStats short_tracks = triangulate_flow_tracks(cams, flows, masks, short_points, o);
+  const FlowTrackStats short_tracks =
+      triangulate_flow_tracks(c.cams, c.flows, c.masks, short_points, o);
   ASSERT_LT(short_tracks.kept, static_cast<int>(n)) << "the clip is not slow enough";
   const FlowTrackStats st =
-      triangulate_flow_tracks_lengthening(cams, flows, masks, points, static_cast<int>(n), o);
+      triangulate_flow_tracks_lengthening(c.cams, c.flows, c.masks, points, static_cast<int>(n), o);
   EXPECT_GE(st.kept, static_cast<int>(n))
       << short_tracks.kept << " kept with 16 frames, " << st.kept << " with " << st.max_length;
   EXPECT_GT(st.max_length, o.max_length);
-  std::vector<double> errors;
-  for (size_t k = 0; k < n; ++k) {
-    const Intrinsics& K = s.intrinsics;
-    for (const Eigen::Vector3d& X : points[k]) {
-      const Eigen::Vector3d p = cams[k].pose.R.transpose() * (X - cams[k].pose.t);
-      const int u = int(std::lround(K.fx * p.x() / p.z() + K.cx));
-      const int v = int(std::lround(K.fy * p.y() / p.z() + K.cy));
-      ASSERT_TRUE(u >= 0 && v >= 0 && u < so.width && v < so.height);
-      errors.push_back(std::abs(p.z() / s.frames[k].depth.at<float>(v, u) - 1.0));
-    }
-  }
-  std::sort(errors.begin(), errors.end());
+  const std::vector<double> errors = sorted_depth_errors(c, points);
+  ASSERT_FALSE(errors.empty());
   EXPECT_LT(errors[errors.size() / 2], 0.01);
   // Nothing more asked for: the given length's result stands.
   std::vector<std::vector<Eigen::Vector3d>> again(n);
-  EXPECT_EQ(triangulate_flow_tracks_lengthening(cams, flows, masks, again, 0, o).max_length,
+  EXPECT_EQ(triangulate_flow_tracks_lengthening(c.cams, c.flows, c.masks, again, 0, o).max_length,
             o.max_length);
 }
 

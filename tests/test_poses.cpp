@@ -612,5 +612,47 @@ TEST(ScaleCalibration, UsesColmapPointsByNameAndRescalesIntrinsics) {
   EXPECT_THROW(calibrate_scale(scene.cameras, {depths[0]}, model), Error);
 }
 
+// A run on every 2nd frame from frame 1 writes each frame's time in the input as its poses.txt
+// timestamp (frame 1 + 2k of an image folder, read at 30 fps: (1 + 2k) / 30 s, the generated
+// scene's own timestamps; it wrote k / fps before), and that
+// poses.txt, one pose per selected frame, is taken back by a run with the same frame selection
+// (matched in order) with the same poses out.
+TEST(TrajectoryIO, RunWithFrameStepWritesSourceTimesAndTakesItsPosesBack) {
+  test::TempDir dir;
+  const fs::path scene = dir / "scene";
+  test::CommandResult r = test::run_cvd("scene --out " + test::shell_quoted(scene) +
+                                        " --frames 7 --width 96 --height 64 --fps 30");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const std::string common =
+      " --first-frame 1 --frame-step 2 --epochs 0 --warmup 1 --width 0.0625 --depth-size 48"
+      " --no-videos --no-ply --poses-format tum --intrinsics " +
+      test::intrinsics_flag_value(scene / "intrinsics.json");
+  const fs::path first = dir / "first", second = dir / "second";
+  r = test::run_cvd("run " + test::shell_quoted(scene / "rgb") + " -o " +
+                    test::shell_quoted(first) + " --poses " +
+                    test::shell_quoted(scene / "poses.txt") + common);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const std::vector<TimedPose> given = read_tum_trajectory(scene / "poses.txt");
+  const std::vector<TimedPose> written = read_tum_trajectory(first / "poses.txt");
+  ASSERT_EQ(given.size(), 7u);
+  ASSERT_EQ(written.size(), 3u);
+  for (size_t k = 0; k < written.size(); ++k) {
+    EXPECT_NEAR(written[k].timestamp, (1.0 + 2.0 * static_cast<double>(k)) / 30.0, 1e-9) << k;
+    EXPECT_NEAR(written[k].timestamp, given[1 + 2 * k].timestamp, 1e-6) << k;  // %.6f
+    EXPECT_LT((written[k].pose.t - given[1 + 2 * k].pose.t).norm(), 1e-9) << k;
+  }
+  r = test::run_cvd("run " + test::shell_quoted(scene / "rgb") + " -o " +
+                    test::shell_quoted(second) + " --poses " +
+                    test::shell_quoted(first / "poses.txt") + common);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const std::vector<TimedPose> again = read_tum_trajectory(second / "poses.txt");
+  ASSERT_EQ(again.size(), written.size());
+  for (size_t k = 0; k < again.size(); ++k) {
+    EXPECT_NEAR(again[k].timestamp, written[k].timestamp, 1e-9) << k;
+    EXPECT_LT((again[k].pose.t - written[k].pose.t).norm(), 1e-9) << k;
+    EXPECT_LT((again[k].pose.R - written[k].pose.R).norm(), 1e-9) << k;
+  }
+}
+
 }  // namespace
 }  // namespace cvd

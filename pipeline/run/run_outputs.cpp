@@ -107,7 +107,8 @@ void write_cameras(const fs::path& out, const RunOutputs& r) {
   std::vector<NamedCamera> reg;
   for (size_t k = 0; k < r.cameras.size(); ++k) {
     if (!r.cameras[k].registered) continue;
-    traj.push_back({static_cast<double>(k) / r.fps, r.cameras[k].pose});
+    traj.push_back({r.timestamps.empty() ? static_cast<double>(k) / r.fps : r.timestamps.at(k),
+                    r.cameras[k].pose});
     reg.push_back(r.cameras[k]);
   }
   write_tum_trajectory(out / "poses.txt", traj);

@@ -3,7 +3,8 @@
 //   depth/<frame>.pfm           float32 depth (network units = pose units)
 //   depth_png16/<frame>.png     uint16 depth; depth = value * depth_per_unit (scale.json); 0 = invalid
 //   depth_color/<frame>.png     colour-mapped inverse depth, ONE range for the whole video
-//   poses.txt                   TUM trajectory (camera-to-world; timestamp = index / fps)
+//   poses.txt                   TUM trajectory (camera-to-world; timestamp = the frame's time in
+//                               the input: source index / source fps)
 //   colmap/{cameras,images,points3D}.txt   COLMAP text model (depth resolution)
 //   intrinsics.json             {fx, fy, cx, cy, width, height} at the depth resolution
 //   points.ply                  fused, subsampled coloured point cloud (ASCII PLY)
@@ -26,7 +27,8 @@ struct RunOutputs {
   std::vector<cv::Mat> depths;       // CV_32F
   std::vector<cv::Mat> frames_bgr;   // at the depth resolution (for colours and videos)
   std::vector<NamedCamera> cameras;  // at the depth resolution
-  double fps = 30;
+  std::vector<double> timestamps;    // seconds of each frame in the input (empty: index / fps)
+  double fps = 30;                   // rate of these frames (the videos')
 };
 
 // The depth maps in each of `formats` ("pfm", "png16", "color", "npy"; see RunOptions).

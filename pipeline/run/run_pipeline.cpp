@@ -229,7 +229,8 @@ RunResult run_pipeline(const RunOptions& o) {
   PartialOutputsGuard partial_outputs(o.out);
   outs.names = frames.names;
   outs.cameras = cams;
-  outs.fps = frames.fps;
+  outs.fps = frames.selected_fps();
+  for (int k = 0; k < n; ++k) outs.timestamps.push_back(frames.timestamp(k));
   for (int k = 0; k < n; ++k) {
     cv::Mat s;
     cv::resize(frames.load(k), s, dsize, 0, 0, cv::INTER_AREA);
@@ -275,7 +276,7 @@ RunResult run_pipeline(const RunOptions& o) {
   json frame_list = json::array();
   for (int k = 0; k < n; ++k)
     if (cams[k].registered)
-      frame_list.push_back({{"name", frames.names[k]}, {"timestamp", k / frames.fps}});
+      frame_list.push_back({{"name", frames.names[k]}, {"timestamp", frames.timestamp(k)}});
   info["frames"] = frame_list;
   info["poses"] = {{"source", poses.source},
                    {"intrinsics_source", poses.intrinsics_source},

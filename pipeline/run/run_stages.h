@@ -21,9 +21,13 @@ struct FramesStage {
   std::vector<std::string> names;
   int width = 0, height = 0;  // of the cached frames (the input, capped at the flow size)
   int input_width = 0, input_height = 0;
-  double fps = 30;
+  double fps = 30;            // of the input (source frames per second)
+  int first = 0, step = 1;    // frame k is the input's frame first + k * step
   std::filesystem::path dir;  // cache/frames/<name>.png
   cv::Mat load(int k) const;  // BGR at the cached size
+  // Seconds of frame k in the input (a TUM timestamp), and the rate of the selected frames.
+  double timestamp(int k) const { return (first + static_cast<double>(k) * step) / fps; }
+  double selected_fps() const { return fps / step; }
 };
 FramesStage run_frames_stage(const RunOptions& o, const std::filesystem::path& cache);
 

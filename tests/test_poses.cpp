@@ -12,6 +12,7 @@
 #include "pipeline/flow/pair_sampling.h"
 #include "pipeline/geometry/scale_calibration.h"
 #include "pipeline/io/trajectory_io.h"
+#include "pipeline/poses/colmap_point_parallax.h"
 #include "test_support.h"
 
 namespace cvd {
@@ -652,6 +653,37 @@ TEST(TrajectoryIO, RunWithFrameStepWritesSourceTimesAndTakesItsPosesBack) {
     EXPECT_LT((again[k].pose.t - written[k].pose.t).norm(), 1e-9) << k;
     EXPECT_LT((again[k].pose.R - written[k].pose.R).norm(), 1e-9) << k;
   }
+}
+
+// The widest angle between the rays that see a point: two cameras 1 apart see a point at depth 2
+// on their bisector under 2 atan(0.5 / 2) = 28.07 deg; a third camera between them changes
+// nothing; a point seen by one registered image (the other id is not in the model) is skipped.
+TEST(ColmapPointParallax, WidestAngleBetweenTheObservingCameras) {
+  ColmapModel m;
+  const auto image = [&](int id, double x) {
+    ColmapImage im;
+    im.id = id;
+    im.name = "f" + std::to_string(id);
+    im.camera_id = 1;
+    im.pose.t = Eigen::Vector3d(x, 0, 0);
+    m.images[im.name] = im;
+  };
+  image(1, 0.0);
+  image(2, 1.0);
+  image(3, 0.5);
+  ColmapPoint a;
+  a.id = 1;
+  a.xyz = Eigen::Vector3d(0.5, 0, 2);
+  a.track = {{1, 0}, {3, 0}, {2, 0}};
+  ColmapPoint b;
+  b.id = 2;
+  b.xyz = Eigen::Vector3d(0, 0, 5);
+  b.track = {{1, 1}, {9, 0}};
+  m.points[a.id] = a;
+  m.points[b.id] = b;
+  const std::vector<double> p = colmap_point_parallax_deg(m);
+  ASSERT_EQ(p.size(), 1u);
+  EXPECT_NEAR(p[0], 2.0 * std::atan(0.25) * 180.0 / M_PI, 1e-9);
 }
 
 }  // namespace

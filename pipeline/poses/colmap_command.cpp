@@ -33,10 +33,6 @@ std::string quoted(const std::string& s) {
 
 }  // namespace
 
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
-
 std::string tail_lines(const fs::path& file, size_t n) {
   std::ifstream in(file);
   std::deque<std::string> lines;

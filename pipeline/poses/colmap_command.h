@@ -6,12 +6,12 @@
 #include <string>
 #include <vector>
 
+#include "engine/elapsed_time.h"
 #include "pipeline/poses/colmap_runner.h"
 
 namespace cvd::colmap {
 
 using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0);
 
 // The last `n` non-empty lines of a text file, each on a new line prefixed "  | " (for errors).
 std::string tail_lines(const std::filesystem::path& file, size_t n);

@@ -107,7 +107,7 @@ ColmapModel triangulate_known_poses(const std::vector<ColmapFrame>& frames,
            result.log_file.string());
   }
   result.model = colmap::to_frame_space(model, images.user_name, set.width, set.height);
-  result.seconds = colmap::seconds_since(t_start);
+  result.seconds = seconds_since(t_start);
   spdlog::info("colmap: {} points triangulated with the given poses of {} frames in {:.1f} s",
                result.model.points.size(), given, result.seconds);
   return result.model;

@@ -36,7 +36,6 @@ using colmap::FrameSet;
 using colmap::internal_name;
 using colmap::require_success;
 using colmap::run_logged;
-using colmap::seconds_since;
 using colmap::tail_lines;
 using colmap::to_frame_space;
 using colmap::write_colmap_images;

@@ -10,6 +10,7 @@
 #include <opencv2/video/tracking.hpp>
 #include <thread>
 
+#include "engine/elapsed_time.h"
 #include "engine/error.h"
 #include "pipeline/geometry/median.h"
 #include "pipeline/poses/flow_camera_init.h"
@@ -18,10 +19,6 @@
 namespace cvd {
 
 namespace {
-
-double seconds_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
 
 // Pixel coordinates between two resolutions with pixel centres at integers (cv::resize's
 // half-pixel alignment): x_b = (x_a + 0.5) * s - 0.5.

@@ -2,8 +2,10 @@
 
 #include <spdlog/spdlog.h>
 
+#include "pipeline/geometry/median.h"
 #include "pipeline/io/atomic_file.h"
 #include "pipeline/io/trajectory_io.h"
+#include "pipeline/poses/colmap_point_parallax.h"
 #include "pipeline/poses/colmap_runner.h"
 #include "pipeline/poses/intrinsics_focal_search.h"
 
@@ -93,6 +95,17 @@ void run_colmap_poses(const RunOptions& o, const FramesStage& f, std::optional<I
       st.cameras[k] = {f.names[k], Pose{}, K ? *K : Intrinsics{}, false, 0};
     }
   }
+  // How far apart the cameras are for the points they see (cached models too).
+  const std::vector<double> parallax = colmap_point_parallax_deg(model);
+  const double median_parallax = upper_median(parallax);
+  st.info["median_point_parallax_deg"] = parallax.empty() ? json() : json(median_parallax);
+  if (!parallax.empty() && median_parallax < kLowPointParallaxDeg)
+    spdlog::warn(
+        "poses: little parallax: the rays that see COLMAP's points are a median {:.2f} deg apart "
+        "(under {:.0f}), so a camera rotation error of a few tenths of a degree reads as a depth "
+        "error of several percent and the trained depth may end worse than the network's start; "
+        "poses from another sensor (--poses) or a clip with more camera motion help",
+        median_parallax, kLowPointParallaxDeg);
   // Every registered frame shares one camera; give unregistered frames its intrinsics.
   for (auto& c : st.cameras)
     if (c.registered) K = c.intrinsics;

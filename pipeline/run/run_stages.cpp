@@ -12,6 +12,7 @@
 #include <opencv2/imgproc.hpp>
 #include <set>
 
+#include "engine/elapsed_time.h"
 #include "engine/error.h"
 #include "engine/process_group.h"
 #include "pipeline/flow/flow_dis.h"
@@ -33,14 +34,6 @@ namespace cvd {
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;
-
-namespace {
-
-double seconds_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-
-}  // namespace
 
 uint32_t cameras_crc32(const std::vector<NamedCamera>& cams) {
   uLong crc = crc32(0L, Z_NULL, 0);

@@ -1,0 +1,32 @@
+#include "pipeline/poses/colmap_point_parallax.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+
+namespace cvd {
+
+std::vector<double> colmap_point_parallax_deg(const ColmapModel& model) {
+  std::map<int, Eigen::Vector3d> centre;  // camera centre of each image id
+  for (const auto& [name, image] : model.images) centre[image.id] = image.pose.t;
+  std::vector<double> parallax;
+  std::vector<Eigen::Vector3d> rays;
+  for (const auto& [id, point] : model.points) {
+    rays.clear();
+    for (const ColmapTrackElement& e : point.track) {
+      const auto c = centre.find(e.image_id);
+      if (c == centre.end()) continue;
+      const Eigen::Vector3d d = point.xyz - c->second;
+      if (d.norm() > 0) rays.push_back(d.normalized());
+    }
+    if (rays.size() < 2) continue;
+    double min_cos = 1.0;
+    for (size_t i = 0; i < rays.size(); ++i)
+      for (size_t j = i + 1; j < rays.size(); ++j)
+        min_cos = std::min(min_cos, rays[i].dot(rays[j]));
+    parallax.push_back(std::acos(std::clamp(min_cos, -1.0, 1.0)) * 180.0 / M_PI);
+  }
+  return parallax;
+}
+
+}  // namespace cvd

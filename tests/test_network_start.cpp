@@ -146,5 +146,26 @@ TEST(NetworkStart, NoSparsePointsGivesTheFallbackPlaneAndAWarning) {
   EXPECT_NEAR(d.data<float>()[d.numel() - 1], 2.5, 1e-5);
 }
 
+// On a long clip the held-out frames are capped at 64 (every n-th frame with points), so that each
+// check costs what it does on a clip of 256 frames; shorter clips keep every 4th frame.
+TEST(NetworkStart, LongClipsHoldOutAtMost64Frames) {
+  Fixture f;
+  const std::vector<SparseDepth> eight = f.points(20, false);
+  for (const int frames : {8, 300}) {
+    std::vector<SparseDepth> s;
+    for (int k = 0; k < frames; ++k) s.push_back(eight[size_t(k % kFrames)]);
+    auto net = tiny_net();
+    NetworkStartOptions o;
+    o.warmup_steps = 1;
+    const auto load = [&f](int k) { return f.images[size_t(k % kFrames)]; };
+    const nlohmann::json info = start_default_network(*net, load, s, o);
+    const int every = frames == 8 ? 4 : 5;  // 300 frames: ceil(300 / 64) = 5
+    EXPECT_EQ(info["warmup_held_out"],
+              "every " + std::to_string(every) + "th frame with sparse points held out");
+    EXPECT_EQ(info["warmup_held_out_frames"].get<int>(), frames / every);
+    EXPECT_LE(info["warmup_held_out_frames"].get<int>(), 64);
+  }
+}
+
 }  // namespace
 }  // namespace cvd

@@ -33,6 +33,9 @@ void append_point(SparseDepth& s, const SparseDepth& from, size_t k) {
 
 SparseSplit split_sparse(const std::vector<SparseDepth>& sparse) {
   constexpr size_t kMinPoints = 8;
+  // Each check runs the network on every held-out frame: on long clips (a 2,000-frame clip whose
+  // flow tracks reach every frame) every 4th frame made the checks cost more than the warm-up.
+  constexpr size_t kMaxHeldOutFrames = 64;
   SparseSplit s;
   s.train.resize(sparse.size());
   s.held_out.resize(sparse.size());
@@ -42,9 +45,11 @@ SparseSplit split_sparse(const std::vector<SparseDepth>& sparse) {
   if (usable.size() >= 4) {
     // Whole frames held out: a warm-up that fits one frame's points (or their frame-to-frame
     // scale drift) rather than what images show does not carry over to other frames.
+    const size_t every =
+        std::max<size_t>(4, (usable.size() + kMaxHeldOutFrames - 1) / kMaxHeldOutFrames);
     for (size_t q = 0; q < usable.size(); ++q) {
       const int f = usable[q];
-      if (q % 4 == 3) {
+      if (q % every == every - 1) {
         s.held_out[f] = sparse[f];
         s.held_out_frames.push_back(f);
       } else {
@@ -52,7 +57,7 @@ SparseSplit split_sparse(const std::vector<SparseDepth>& sparse) {
         s.train_frames.push_back(f);
       }
     }
-    s.how = "every 4th frame with sparse points held out";
+    s.how = fmt::format("every {}th frame with sparse points held out", every);
   } else {
     for (int f : usable) {
       for (size_t k = 0; k < sparse[f].z.size(); ++k)
@@ -216,6 +221,7 @@ nlohmann::json start_default_network(DepthNet& net, const std::function<Tensor(i
   info["warmup_steps"] = o.warmup_steps;
   info["warmup_final_loss"] = last;
   info["warmup_held_out"] = split.how;
+  info["warmup_held_out_frames"] = split.held_out_frames.size();
   info["warmup_loss"] =
       o.scale_free_per_frame ? "log depth up to one scale per frame" : "absolute log depth";
   info["warmup_checks"] = checks;

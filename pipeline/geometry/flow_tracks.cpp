@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "engine/error.h"
+#include "pipeline/geometry/ray_parallax.h"
 
 namespace cvd {
 
@@ -57,10 +58,7 @@ bool triangulate_track(const std::vector<NamedCamera>& cams, const std::vector<O
     b += P * c.pose.t;
     rays.push_back(d);
   }
-  double min_cos = 1.0;
-  for (size_t a = 0; a < rays.size(); ++a)
-    for (size_t c = a + 1; c < rays.size(); ++c) min_cos = std::min(min_cos, rays[a].dot(rays[c]));
-  if (min_cos > std::cos(o.min_parallax_deg * M_PI / 180.0)) return false;
+  if (min_ray_cosine(rays) > std::cos(o.min_parallax_deg * M_PI / 180.0)) return false;
   Eigen::FullPivLU<Eigen::Matrix3d> lu(A);
   if (!lu.isInvertible()) return false;
   X = lu.solve(b);

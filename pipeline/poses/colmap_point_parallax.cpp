@@ -1,8 +1,8 @@
 #include "pipeline/poses/colmap_point_parallax.h"
 
-#include <algorithm>
-#include <cmath>
 #include <map>
+
+#include "pipeline/geometry/ray_parallax.h"
 
 namespace cvd {
 
@@ -20,11 +20,7 @@ std::vector<double> colmap_point_parallax_deg(const ColmapModel& model) {
       if (d.norm() > 0) rays.push_back(d.normalized());
     }
     if (rays.size() < 2) continue;
-    double min_cos = 1.0;
-    for (size_t i = 0; i < rays.size(); ++i)
-      for (size_t j = i + 1; j < rays.size(); ++j)
-        min_cos = std::min(min_cos, rays[i].dot(rays[j]));
-    parallax.push_back(std::acos(std::clamp(min_cos, -1.0, 1.0)) * 180.0 / M_PI);
+    parallax.push_back(widest_ray_angle_deg(rays));
   }
   return parallax;
 }

@@ -11,6 +11,7 @@
 
 #include "engine/error.h"
 #include "pipeline/geometry/median.h"
+#include "pipeline/geometry/ray_parallax.h"
 
 namespace cvd {
 
@@ -142,11 +143,7 @@ std::vector<Eigen::Vector3d> intersect_track_rays(const std::vector<PixelTrack>&
     M += 1e-12 * Eigen::Matrix3d::Identity();
     X[t] = M.ldlt().solve(rhs);
     if (parallax_deg) {
-      double min_cos = 1.0;
-      for (size_t i = 0; i < rays.size(); ++i)
-        for (size_t j = i + 1; j < rays.size(); ++j)
-          min_cos = std::min(min_cos, rays[i].dot(rays[j]));
-      (*parallax_deg)[t] = std::acos(std::clamp(min_cos, -1.0, 1.0)) * 180.0 / M_PI;
+      (*parallax_deg)[t] = widest_ray_angle_deg(rays);
     }
   }
   return X;

@@ -13,6 +13,7 @@
 #include "engine/elapsed_time.h"
 #include "engine/error.h"
 #include "pipeline/geometry/median.h"
+#include "pipeline/geometry/ray_parallax.h"
 #include "pipeline/poses/flow_camera_init.h"
 #include "pipeline/poses/track_bundle_adjustment.h"
 
@@ -391,11 +392,7 @@ FlowPoseResult estimate_flow_poses(const std::vector<std::string>& names,
       inliers[t].push_back(ob);
       rays.push_back(best.cams.R[k] * camera_ray(best.cams, ob.x, ob.y));
     }
-    double min_cos = 1.0;
-    for (size_t i = 0; i < rays.size(); ++i)
-      for (size_t j = i + 1; j < rays.size(); ++j)
-        min_cos = std::min(min_cos, rays[i].dot(rays[j]));
-    parallax[t] = std::acos(std::clamp(min_cos, -1.0, 1.0)) * 180.0 / M_PI;
+    parallax[t] = widest_ray_angle_deg(rays);
   }
   auto exported = [&](size_t t) {
     return inliers[t].size() >= size_t(o.min_point_views) &&

@@ -214,12 +214,12 @@ std::vector<NamedCamera> cameras_from_file(const RunOptions& o, const FramesStag
     // Poses are matched to the SELECTED frames by source index (first + k * step), unless the
     // file has exactly one pose per selected frame (cvd's own poses.txt of a run with the same
     // --frame-step / --first-frame / --max-frames): then in order.
-    const bool in_order = poses.size() == f.names.size() && (o.first_frame > 0 || o.frame_step > 1);
+    const bool in_order = poses.size() == f.names.size() && (f.first > 0 || f.step > 1);
     if (in_order)
       spdlog::info("poses: {} has one pose per selected frame; matched in order",
                    o.poses_file.string());
     for (size_t k = 0; k < f.names.size(); ++k) {
-      size_t src = in_order ? k : o.first_frame + k * std::max(1, o.frame_step);
+      size_t src = in_order ? k : size_t(f.first) + k * size_t(f.step);
       if (src >= poses.size())
         fail(ErrorCategory::invalid_argument,
              "{}: {} poses, but frame '{}' needs pose #{} (fewer poses than frames)",

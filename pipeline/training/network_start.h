@@ -36,9 +36,8 @@ struct NetworkStartOptions {
 // Sets `net`'s starting state: output head zero and its bias at the median sparse depth (the
 // flat plane), then the warm-up, checked every few steps on held-out sparse depths (every 4th
 // frame that has points, or every n-th where that keeps at most 64 frames; every 5th point when
-// fewer than 4 frames have any). The state with
-// the lowest held-out error, the flat plane included, is the one kept. `load_frame(k)` gives frame
-// k as RGB in [0, 1], [3, H, W]. Returns what was done for run.json; `warnings` gets a line when
+// fewer than 4 frames have any). The state with the lowest held-out error, the flat plane
+// included, is the one kept. `load_frame(k)` gives frame k as RGB in [0, 1], [3, H, W]. Returns what was done for run.json; `warnings` gets a line when
 // there were no sparse points.
 nlohmann::json start_default_network(DepthNet& net, const std::function<Tensor(int)>& load_frame,
                                      const std::vector<SparseDepth>& sparse,

@@ -176,7 +176,13 @@ BatchNorm2d::BatchNorm2d(const BatchNorm2dOptions& o, DType dtype) : options_(o)
   }
 }
 
-Tensor BatchNorm2d::forward(const Tensor& x) {
+Tensor BatchNorm2d::forward(const Tensor& x) { return forward_impl(x, nullptr); }
+
+Tensor BatchNorm2d::forward_act(const Tensor& x, const UnaryParams& act) {
+  return forward_impl(x, &act);
+}
+
+Tensor BatchNorm2d::forward_impl(const Tensor& x, const UnaryParams* act) {
   check_image_input(x, options_.num_features, "BatchNorm2d");
   const bool batch_stats = is_training() || !options_.track_running_stats;
   CVD_CHECK(!batch_stats || x.numel() / x.size(1) > 1,
@@ -185,23 +191,23 @@ Tensor BatchNorm2d::forward(const Tensor& x) {
   BatchNormParams p;
   p.training = batch_stats;
   p.eps = options_.eps;
+  Tensor rm = running_mean, rv = running_var;
+  p.momentum = 0.0;
   if (!options_.track_running_stats) {
     // Batch statistics only: the op's running-stat update goes to throwaway tensors.
-    p.momentum = 0.0;
-    Tensor rm = Tensor::zeros({options_.num_features}, x.dtype(), x.device());
-    Tensor rv = Tensor::ones({options_.num_features}, x.dtype(), x.device());
-    if (sync_batch_norm_active()) return sync_batch_norm(x, rm, rv, weight, bias, p);
-    return batch_norm(x, rm, rv, weight, bias, p);
-  }
-  p.momentum = 0.0;
-  if (is_training()) {
+    rm = Tensor::zeros({options_.num_features}, x.dtype(), x.device());
+    rv = Tensor::ones({options_.num_features}, x.dtype(), x.device());
+  } else if (is_training()) {
     const double n = num_batches_tracked.item() + 1.0;
     num_batches_tracked.fill_(n);
     p.momentum = options_.momentum ? *options_.momentum : 1.0 / n;
   }
-  if (batch_stats && sync_batch_norm_active())
-    return sync_batch_norm(x, running_mean, running_var, weight, bias, p);
-  return batch_norm(x, running_mean, running_var, weight, bias, p);
+  if (batch_stats && sync_batch_norm_active()) {
+    Tensor y = sync_batch_norm(x, rm, rv, weight, bias, p);
+    return act ? unary(y, *act) : y;
+  }
+  return act ? batch_norm_act(x, rm, rv, weight, bias, p, *act)
+             : batch_norm(x, rm, rv, weight, bias, p);
 }
 
 std::string BatchNorm2d::extra_repr() const {
@@ -283,7 +289,25 @@ const std::shared_ptr<Module>& Sequential::operator[](size_t i) const {
 
 Tensor Sequential::forward(const Tensor& x) {
   Tensor y = x;
-  for (const auto& [_, m] : children()) y = m->forward(y);
+  const auto& ch = children();
+  for (size_t i = 0; i < ch.size(); ++i) {
+    // BatchNorm2d then ReLU / ReLU6: one batch_norm_act, whose output need not be kept for
+    // backward (engine/rematerialize.h). Same values and gradients as the two modules.
+    if (auto* bn = dynamic_cast<BatchNorm2d*>(ch[i].second.get()); bn && i + 1 < ch.size()) {
+      const Module* next = ch[i + 1].second.get();
+      if (dynamic_cast<const ReLU*>(next)) {
+        y = bn->forward_act(y, {UnaryOp::relu});
+        ++i;
+        continue;
+      }
+      if (dynamic_cast<const ReLU6*>(next)) {
+        y = bn->forward_act(y, {UnaryOp::clip, 0.0, 6.0});
+        ++i;
+        continue;
+      }
+    }
+    y = ch[i].second->forward(y);
+  }
   return y;
 }
 

@@ -181,6 +181,8 @@ class BatchNorm2d : public Module {
  public:
   explicit BatchNorm2d(const BatchNorm2dOptions& options, DType dtype = DType::f32);
   Tensor forward(const Tensor& x) override;
+  // act(forward(x)) for act = relu or clip (relu6) as one op (engine/ops.h batch_norm_act).
+  Tensor forward_act(const Tensor& x, const UnaryParams& act);
   std::string type_name() const override { return "BatchNorm2d"; }
   std::string extra_repr() const override;
   const BatchNorm2dOptions& options() const { return options_; }
@@ -190,6 +192,7 @@ class BatchNorm2d : public Module {
   Tensor num_batches_tracked;        // 0-d f64 counter (keeps f64 through to(DType))
 
  private:
+  Tensor forward_impl(const Tensor& x, const UnaryParams* act);
   BatchNorm2dOptions options_;
 };
 

@@ -88,6 +88,12 @@ Tensor conv_transpose2d(const Tensor& x, const Tensor& w, const Tensor& b,
 // training (they never require grad).
 Tensor batch_norm(const Tensor& x, const Tensor& running_mean, const Tensor& running_var,
                   const Tensor& gamma, const Tensor& beta, const BatchNormParams& p);
+// act(batch_norm(x)) for act = relu or clip (relu6), one recorded op that keeps x but not its
+// output: backward recomputes the pre-activation, and convolutions that read the output
+// recompute it too instead of keeping it (engine/rematerialize.h).
+Tensor batch_norm_act(const Tensor& x, const Tensor& running_mean, const Tensor& running_var,
+                      const Tensor& gamma, const Tensor& beta, const BatchNormParams& p,
+                      const UnaryParams& act);
 Tensor max_pool2d(const Tensor& x, const Pool2dParams& p);
 Tensor avg_pool2d(const Tensor& x, const Pool2dParams& p);
 Tensor upsample_bilinear2d(const Tensor& x, int64_t out_h, int64_t out_w, bool align_corners);

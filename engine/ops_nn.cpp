@@ -2,7 +2,9 @@
 // Each forward runs its kernel and records a backward that runs the matching backward kernels.
 #include <cmath>
 
+#include "engine/elementwise_math.h"
 #include "engine/op_support.h"
+#include "engine/rematerialize.h"
 
 namespace cvd {
 
@@ -45,15 +47,16 @@ Tensor conv2d(const Tensor& x_in, const Tensor& w_in, const Tensor& b_in, const 
   dispatch(OpId::conv2d, x, KernelArgs{{x, w, b}, {y}, &p});
   if (!any_requires_grad({x, w, b})) return y;
   return record("conv2d", y, {x, w, b},
-                [xs = x.detach(), ws = w.detach(), has_b = b.defined(), p](
-                    const Tensor& g_in, const std::vector<bool>& need) {
+                [xsaved = SavedTensor(x), xshape = x.shape(), ws = w.detach(), has_b = b.defined(),
+                 p](const Tensor& g_in, const std::vector<bool>& need) {
                   Tensor g = g_in.contiguous();
                   Tensor gx, gw, gb;
                   if (need[0]) {
-                    gx = empty_like_kind(xs.shape(), xs);
+                    gx = empty_like_kind(xshape, ws);
                     dispatch(OpId::conv2d_backward_data, g, KernelArgs{{g, ws}, {gx}, &p});
                   }
                   if (need[1] || (has_b && need[2])) {
+                    const Tensor xs = xsaved.get();
                     gw = empty_like_kind(ws.shape(), ws);
                     if (has_b && need[2]) gb = empty_like_kind({ws.size(0)}, ws);
                     dispatch(OpId::conv2d_backward_weight, g, KernelArgs{{g, xs}, {gw, gb}, &p});
@@ -87,15 +90,16 @@ Tensor conv_transpose2d(const Tensor& x_in, const Tensor& w_in, const Tensor& b_
   if (!any_requires_grad({x, w, b})) return y;
   return record(
       "conv_transpose2d", y, {x, w, b},
-      [xs = x.detach(), ws = w.detach(), has_b = b.defined(), oc, p](
+      [xsaved = SavedTensor(x), xshape = x.shape(), ws = w.detach(), has_b = b.defined(), oc, p](
           const Tensor& g_in, const std::vector<bool>& need) {
         Tensor g = g_in.contiguous();
         Tensor gx, gw, gb;
         if (need[0]) {
-          gx = empty_like_kind(xs.shape(), xs);
+          gx = empty_like_kind(xshape, ws);
           dispatch(OpId::conv_transpose2d_backward_data, g, KernelArgs{{g, ws}, {gx}, &p});
         }
         if (need[1] || (has_b && need[2])) {
+          const Tensor xs = xsaved.get();
           gw = empty_like_kind(ws.shape(), ws);
           if (has_b && need[2]) gb = empty_like_kind({oc}, ws);
           dispatch(OpId::conv_transpose2d_backward_weight, g, KernelArgs{{g, xs}, {gw, gb}, &p});
@@ -106,48 +110,127 @@ Tensor conv_transpose2d(const Tensor& x_in, const Tensor& w_in, const Tensor& b_
 }
 
 // ---- batch_norm ------------------------------------------------------------------------------
-Tensor batch_norm(const Tensor& x_in, const Tensor& running_mean, const Tensor& running_var,
-                  const Tensor& gamma_in, const Tensor& beta_in, const BatchNormParams& p) {
-  CVD_CHECK(x_in.dim() == 4, "batch_norm: x {} must be 4-d NCHW", x_in.str());
+namespace {
+
+// The checked, contiguous operands of a batch norm and its forward result.
+struct BatchNormForward {
+  Tensor x, gamma, beta, y, mean, invstd;
+};
+
+BatchNormForward batch_norm_forward(const char* op, const Tensor& x_in, const Tensor& running_mean,
+                                    const Tensor& running_var, const Tensor& gamma_in,
+                                    const Tensor& beta_in, const BatchNormParams& p) {
+  CVD_CHECK(x_in.dim() == 4, "{}: x {} must be 4-d NCHW", op, x_in.str());
   int64_t c = x_in.size(1);
   for (const Tensor* t : {&running_mean, &running_var, &gamma_in, &beta_in}) {
     if (!t->defined()) continue;
-    check_same_kind("batch_norm", x_in, *t);
-    CVD_CHECK(t->dim() == 1 && t->size(0) == c, "batch_norm: {} does not match {} channels",
-              t->str(), c);
+    check_same_kind(op, x_in, *t);
+    CVD_CHECK(t->dim() == 1 && t->size(0) == c, "{}: {} does not match {} channels", op, t->str(),
+              c);
   }
-  CVD_CHECK(running_mean.defined() && running_var.defined(),
-            "batch_norm: running statistics are required");
+  CVD_CHECK(running_mean.defined() && running_var.defined(), "{}: running statistics are required",
+            op);
   CVD_CHECK(running_mean.is_contiguous() && running_var.is_contiguous(),
-            "batch_norm: running statistics must be contiguous");
+            "{}: running statistics must be contiguous", op);
   CVD_CHECK(!p.training || x_in.numel() / c > 1,
-            "batch_norm: training needs more than one value per channel, got {}", x_in.str());
-  Tensor x = x_in.contiguous(), gamma = contiguous_or_undefined(gamma_in),
-         beta = contiguous_or_undefined(beta_in);
-  Tensor y = empty_like_kind(x.shape(), x);
-  Tensor mean = empty_like_kind({c}, x), invstd = empty_like_kind({c}, x);
-  dispatch(
-      OpId::batch_norm, x,
-      KernelArgs{
-          {x, gamma, beta, running_mean.detach(), running_var.detach()}, {y, mean, invstd}, &p});
+            "{}: training needs more than one value per channel, got {}", op, x_in.str());
+  BatchNormForward f;
+  f.x = x_in.contiguous();
+  f.gamma = contiguous_or_undefined(gamma_in);
+  f.beta = contiguous_or_undefined(beta_in);
+  f.y = empty_like_kind(f.x.shape(), f.x);
+  f.mean = empty_like_kind({c}, f.x);
+  f.invstd = empty_like_kind({c}, f.x);
+  dispatch(OpId::batch_norm, f.x,
+           KernelArgs{{f.x, f.gamma, f.beta, running_mean.detach(), running_var.detach()},
+                      {f.y, f.mean, f.invstd},
+                      &p});
   if (p.training) {
     running_mean.bump_version();
     running_var.bump_version();
   }
-  if (!any_requires_grad({x, gamma, beta})) return y;
-  return record(
-      "batch_norm", y, {x, gamma, beta},
-      [xs = x.detach(), gs = gamma.defined() ? gamma.detach() : Tensor(), has_beta = beta.defined(),
-       mean, invstd, p](const Tensor& g_in, const std::vector<bool>& need) {
-        Tensor g = g_in.contiguous();
-        int64_t c = xs.size(1);
-        Tensor gx = need[0] ? empty_like_kind(xs.shape(), xs) : Tensor();
-        Tensor gg = gs.defined() && need[1] ? empty_like_kind({c}, xs) : Tensor();
-        Tensor gb = has_beta && need[2] ? empty_like_kind({c}, xs) : Tensor();
-        dispatch(OpId::batch_norm_backward, g,
-                 KernelArgs{{g, xs, gs, mean, invstd}, {gx, gg, gb}, &p});
-        return std::vector<Tensor>{gx, gg, gb};
-      });
+  return f;
+}
+
+// d(loss)/d(x, gamma, beta) of a batch norm from d(loss)/d(y).
+std::vector<Tensor> batch_norm_grads(const Tensor& g, const Tensor& xs, const Tensor& gs,
+                                     bool has_beta, const Tensor& mean, const Tensor& invstd,
+                                     const BatchNormParams& p, const std::vector<bool>& need) {
+  int64_t c = xs.size(1);
+  Tensor gx = need[0] ? empty_like_kind(xs.shape(), xs) : Tensor();
+  Tensor gg = gs.defined() && need[1] ? empty_like_kind({c}, xs) : Tensor();
+  Tensor gb = has_beta && need[2] ? empty_like_kind({c}, xs) : Tensor();
+  dispatch(OpId::batch_norm_backward, g, KernelArgs{{g, xs, gs, mean, invstd}, {gx, gg, gb}, &p});
+  return {gx, gg, gb};
+}
+
+// (x - mean) * invstd * gamma + beta with given statistics (the eval-mode kernel, to which the
+// statistics are passed as running mean and var = 1 / invstd^2 - eps).
+Tensor batch_norm_apply(const Tensor& xs, const Tensor& gs, const Tensor& bs, const Tensor& mean,
+                        const Tensor& var, double eps) {
+  BatchNormParams p;
+  p.training = false;
+  p.momentum = 0.0;
+  p.eps = eps;
+  Tensor y = empty_like_kind(xs.shape(), xs);
+  Tensor m = empty_like_kind(mean.shape(), mean), s = empty_like_kind(mean.shape(), mean);
+  dispatch(OpId::batch_norm, xs, KernelArgs{{xs, gs, bs, mean, var}, {y, m, s}, &p});
+  return y;
+}
+
+}  // namespace
+
+Tensor batch_norm(const Tensor& x_in, const Tensor& running_mean, const Tensor& running_var,
+                  const Tensor& gamma_in, const Tensor& beta_in, const BatchNormParams& p) {
+  BatchNormForward f =
+      batch_norm_forward("batch_norm", x_in, running_mean, running_var, gamma_in, beta_in, p);
+  if (!any_requires_grad({f.x, f.gamma, f.beta})) return f.y;
+  return record("batch_norm", f.y, {f.x, f.gamma, f.beta},
+                [xs = f.x.detach(), gs = f.gamma.defined() ? f.gamma.detach() : Tensor(),
+                 has_beta = f.beta.defined(), mean = f.mean, invstd = f.invstd,
+                 p](const Tensor& g_in, const std::vector<bool>& need) {
+                  return batch_norm_grads(g_in.contiguous(), xs, gs, has_beta, mean, invstd, p,
+                                          need);
+                });
+}
+
+Tensor batch_norm_act(const Tensor& x_in, const Tensor& running_mean, const Tensor& running_var,
+                      const Tensor& gamma_in, const Tensor& beta_in, const BatchNormParams& p,
+                      const UnaryParams& act) {
+  CVD_CHECK(act.op == UnaryOp::relu || act.op == UnaryOp::clip,
+            "batch_norm_act: the activation must be relu or clip (relu6)");
+  BatchNormForward f =
+      batch_norm_forward("batch_norm_act", x_in, running_mean, running_var, gamma_in, beta_in, p);
+  Tensor z = f.y;
+  dispatch(OpId::unary, z, KernelArgs{{z}, {z}, &act});  // in place
+  if (!any_requires_grad({f.x, f.gamma, f.beta})) return z;
+  // Keeps x (as batch_norm does), not z: backward recomputes the pre-activation from x for the
+  // activation's mask, so z lives only as long as its consumers keep it.
+  Tensor var;
+  {
+    NoGradGuard no_grad;
+    var = add_scalar(reciprocal(mul(f.invstd, f.invstd)), -p.eps);
+  }
+  const Tensor xs = f.x.detach(), gs = f.gamma.defined() ? f.gamma.detach() : Tensor(),
+               bs = f.beta.defined() ? f.beta.detach() : Tensor();
+  record("batch_norm_act", z, {f.x, f.gamma, f.beta},
+         [xs, gs, bs, mean = f.mean, invstd = f.invstd, var, p, act](
+             const Tensor& g_in, const std::vector<bool>& need) {
+           Tensor g = g_in.contiguous();
+           Tensor pre = batch_norm_apply(xs, gs, bs, mean, var, p.eps);
+           // relu and clip read only where the pre-activation lies (engine/elementwise_math.h).
+           Tensor gy = empty_like_kind(g.shape(), g);
+           dispatch(OpId::unary_backward, g, KernelArgs{{g, pre, pre}, {gy}, &act});
+           pre = Tensor();
+           return batch_norm_grads(gy, xs, gs, bs.defined(), mean, invstd, p, need);
+         });
+  // Its consumers (convolutions) may recompute z instead of keeping it.
+  mark_rematerializable(z, [xs, gs, bs, mean = f.mean, var, eps = p.eps, act] {
+    Tensor y = batch_norm_apply(xs, gs, bs, mean, var, eps);
+    dispatch(OpId::unary, y, KernelArgs{{y}, {y}, &act});
+    return y;
+  });
+  return z;
 }
 
 // ---- pooling ---------------------------------------------------------------------------------
@@ -172,8 +255,9 @@ Tensor max_pool2d(const Tensor& x_in, const Pool2dParams& p) {
   dispatch(OpId::max_pool2d, x, KernelArgs{{x}, {y}, &p});
   if (!any_requires_grad({x})) return y;
   return record("max_pool2d", y, {x},
-                [xs = x.detach(), p](const Tensor& g_in, const std::vector<bool>&) {
+                [xsaved = SavedTensor(x), p](const Tensor& g_in, const std::vector<bool>&) {
                   Tensor g = g_in.contiguous();
+                  const Tensor xs = xsaved.get();
                   Tensor gx = empty_like_kind(xs.shape(), xs);
                   dispatch(OpId::max_pool2d_backward, g, KernelArgs{{g, xs}, {gx}, &p});
                   return std::vector<Tensor>{gx};

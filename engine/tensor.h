@@ -21,6 +21,7 @@ Shape contiguous_strides(const Shape& s);
 std::string shape_str(const Shape& s);
 
 struct Node;
+struct Rematerializer;
 class Generator;
 
 struct TensorImpl {
@@ -32,6 +33,8 @@ struct TensorImpl {
   bool requires_grad = false;
   std::shared_ptr<TensorImpl> grad;  // accumulated gradient (leaves)
   std::shared_ptr<Node> grad_fn;     // the node that produced this tensor (non-leaves)
+  // Set by ops whose output backward may regenerate instead of keeping (engine/rematerialize.h).
+  std::shared_ptr<const Rematerializer> rematerializer;
 };
 
 class Tensor {

@@ -24,6 +24,8 @@ std::shared_ptr<Conv2d> same_conv(int64_t in, int64_t out, int k, int stride, in
                                   gen);
 }
 
+const UnaryParams kRelu6{UnaryOp::clip, 0.0, 6.0};
+
 std::shared_ptr<BatchNorm2d> bn_tf(int64_t c) {
   return std::make_shared<BatchNorm2d>(BatchNorm2dOptions(c).with_eps(1e-3));
 }
@@ -39,7 +41,7 @@ class DepthwiseSeparableConv : public Module {
     bn2_ = register_module("bn2", bn_tf(out));
   }
   Tensor forward(const Tensor& x) override {
-    return bn2_->forward(conv_pw_->forward(relu6(bn1_->forward(conv_dw_->forward(x)))));
+    return bn2_->forward(conv_pw_->forward(bn1_->forward_act(conv_dw_->forward(x), kRelu6)));
   }
   std::string type_name() const override { return "DepthwiseSeparableConv"; }
 
@@ -64,8 +66,8 @@ class InvertedResidual : public Module {
     bn3_ = register_module("bn3", bn_tf(out));
   }
   Tensor forward(const Tensor& x) override {
-    Tensor y = relu6(bn1_->forward(conv_pw_->forward(x)));
-    y = relu6(bn2_->forward(conv_dw_->forward(y)));
+    Tensor y = bn1_->forward_act(conv_pw_->forward(x), kRelu6);
+    y = bn2_->forward_act(conv_dw_->forward(y), kRelu6);
     y = bn3_->forward(conv_pwl_->forward(y));
     return residual_ ? add(y, x) : y;
   }

@@ -34,8 +34,8 @@ class Bottleneck : public Module {
     }
   }
   Tensor forward(const Tensor& x) override {
-    Tensor y = relu(bn1_->forward(conv1_->forward(x)));
-    y = relu(bn2_->forward(conv2_->forward(y)));
+    Tensor y = bn1_->forward_act(conv1_->forward(x), {UnaryOp::relu});
+    y = bn2_->forward_act(conv2_->forward(y), {UnaryOp::relu});
     y = bn3_->forward(conv3_->forward(y));
     return relu(add(y, downsample_ ? downsample_->forward(x) : x));
   }

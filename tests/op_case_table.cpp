@@ -74,6 +74,23 @@ OpCase bn_case(const std::string& name, bool training, bool affine) {
           }};
 }
 
+// act(batch_norm(x)), optionally read by a convolution, whose backward then regenerates the
+// activation from the batch norm's input (engine/rematerialize.h).
+OpCase bn_act_case(const std::string& name, bool training, UnaryParams act, bool then_conv) {
+  std::vector<InputSpec> in{{{3, 4, 5, 3}}, {{4}, Init::positive}, {{4}}};
+  if (then_conv) in.push_back({{2, 4, 3, 3}});
+  return {name, in,
+          [training, act, then_conv](const In& t) {
+            Tensor rm = Tensor::full({4}, 0.1, t[0].dtype(), t[0].device());
+            Tensor rv = Tensor::full({4}, 1.5, t[0].dtype(), t[0].device());
+            BatchNormParams p{training, 0.1, 1e-5};
+            // x * 3: BN output spread over (-6, 6) and beyond, so relu6 clips on both sides.
+            Tensor z = batch_norm_act(t[0], rm, rv, t[1] * 3.0, t[2], p, act);
+            return then_conv ? conv2d(z, t[3], Tensor(), conv(1, 1, 1, 1, 1)) : z;
+          },
+          5e-5};
+}
+
 }  // namespace
 
 std::vector<OpCase> all_op_cases() {
@@ -185,6 +202,10 @@ std::vector<OpCase> all_op_cases() {
   c.push_back(bn_case("batch_norm_train_plain", true, false));
   c.push_back(bn_case("batch_norm_eval_affine", false, true));
   c.push_back(bn_case("batch_norm_eval_plain", false, false));
+  c.push_back(bn_act_case("batch_norm_relu_train", true, {UnaryOp::relu}, false));
+  c.push_back(bn_act_case("batch_norm_relu6_eval", false, {UnaryOp::clip, 0.0, 6.0}, false));
+  c.push_back(bn_act_case("batch_norm_relu_conv_train", true, {UnaryOp::relu}, true));
+  c.push_back(bn_act_case("batch_norm_relu6_conv_train", true, {UnaryOp::clip, 0.0, 6.0}, true));
   // ---- pooling ----
   c.push_back({"max_pool3x3_s2_p1", {{{2, 3, 7, 6}}}, [](const In& t) {
                  return max_pool2d(t[0], pool(3, 2, 1, false));

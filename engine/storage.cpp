@@ -5,6 +5,7 @@
 #include <new>
 
 #include "engine/error.h"
+#include "engine/host_block_cache.h"
 
 namespace cvd {
 
@@ -13,13 +14,11 @@ namespace {
 class CpuAllocator final : public Allocator {
  public:
   void* allocate(size_t nbytes) override {
-    if (nbytes == 0) return nullptr;
-    size_t rounded = (nbytes + 63) / 64 * 64;
-    void* p = std::aligned_alloc(64, rounded);
-    if (!p) fail(ErrorCategory::internal, "out of host memory allocating {} bytes", nbytes);
-    return p;
+    return nbytes == 0 ? nullptr : host_block_allocate(nbytes);
   }
-  void deallocate(void* p, size_t) override { std::free(p); }
+  void deallocate(void* p, size_t nbytes) override {
+    if (p) host_block_free(p, nbytes);
+  }
   DeviceId device() const override { return DeviceId::cpu(); }
 };
 

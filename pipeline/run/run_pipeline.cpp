@@ -14,6 +14,7 @@
 #include "engine/backend_info.h"
 #include "engine/compute_precision.h"
 #include "engine/cvdw.h"
+#include "engine/host_block_cache.h"
 #include "engine/module_weights.h"
 #include "engine/ops.h"
 #include "engine/process_group.h"
@@ -210,6 +211,8 @@ RunResult run_pipeline(const RunOptions& o) {
   // The training steps alone; the loss before and after, evaluated on a fixed set of pairs, apart.
   timings["training"] = since(t) - tr.loss_evaluation_s;
   timings["loss_evaluation"] = tr.loss_evaluation_s;
+  // The training step's activations, kept for reuse between steps, are not needed again.
+  release_cached_host_blocks();
   RunResult res;
   res.initial_loss = tr.initial_loss;
   res.final_loss = tr.final_loss;

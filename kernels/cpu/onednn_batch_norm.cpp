@@ -1,6 +1,6 @@
 // batch_norm and batch_norm_backward on oneDNN batch-normalization primitives (NCHW, in place of
 // nothing): training (batch statistics, PyTorch running-stat update with the unbiased variance)
-// and eval (running statistics), affine (gamma and/or beta) or not. The training forward runs by
+// and eval (running statistics), affine (gamma and/or beta) or not. Both forwards run by
 // hand: on NCHW tensors oneDNN 2.6 only has its C++ "ncsp_bnorm" (three passes over the data,
 // measured at about a quarter of the depth networks' training step); ours is vectorized.
 #include <algorithm>
@@ -119,44 +119,37 @@ void batch_norm_train_forward(const Tensor& x, const Tensor& gamma, const Tensor
   });
 }
 
-struct ForwardEntry {
-  dnnl::batch_normalization_forward prim;
-};
-
 struct BackwardEntry {
   dnnl::batch_normalization_backward prim;
 };
 
-// Eval forward (running statistics) on a oneDNN primitive.
+// Eval forward (running statistics) by hand as well: one vectorized pass y = x * scale + shift
+// per channel (oneDNN 2.6's NCHW primitive is its slower C++ path; backward recomputes
+// activations through this pass, engine/rematerialize.h).
 void run_eval_forward(const Tensor& x, const Tensor& gamma, const Tensor& beta, const Tensor& y,
                       const Tensor& running_mean, const Tensor& running_var,
                       const BatchNormParams& p) {
-  static PrimitiveCache<ForwardEntry> cache;
-  flags f = flags::use_global_stats;
-  if (gamma.defined()) f = with(f, flags::use_scale);
-  if (beta.defined()) f = with(f, flags::use_shift);
-  const dnnl::memory::desc md = data_desc(x);
-  CacheKey key;
-  key.add(1).add(x.shape()).add(static_cast<int64_t>(f)).add(float_bits(p.eps));
-  key.add(onednn_threads());
-  ForwardEntry& e = cache.get(key, [&] {
-    dnnl::batch_normalization_forward::desc d(dnnl::prop_kind::forward_inference, md,
-                                              static_cast<float>(p.eps), f);
-    auto entry = std::make_unique<ForwardEntry>();
-    entry->prim = dnnl::batch_normalization_forward(
-        dnnl::batch_normalization_forward::primitive_desc(d, cpu_engine()));
-    return entry;
+  const int64_t n = x.shape()[0], c = x.shape()[1];
+  const int64_t plane = c > 0 ? x.numel() / (n * c) : 0;
+  const float* xp = x.data<float>();
+  float* yp = y.data<float>();
+  const float* g = gamma.defined() ? gamma.data<float>() : nullptr;
+  const float* b = beta.defined() ? beta.data<float>() : nullptr;
+  const float* rm = running_mean.data<float>();
+  const float* rv = running_var.data<float>();
+  cpu::parallel_ranges(n * c, plane, [&](int64_t r0, int64_t r1) {
+    for (int64_t r = r0; r < r1; ++r) {
+      const int64_t ch = r % c;
+      const double inv = 1.0 / std::sqrt(static_cast<double>(rv[ch]) + p.eps);
+      const double gs = inv * (g ? g[ch] : 1.0f);
+      const float scale = static_cast<float>(gs);
+      const float shift = static_cast<float>((b ? b[ch] : 0.0f) - rm[ch] * gs);
+      const float* src = xp + r * plane;
+      float* dst = yp + r * plane;
+#pragma omp simd
+      for (int64_t k = 0; k < plane; ++k) dst[k] = src[k] * scale + shift;
+    }
   });
-  const dnnl::memory::desc cmd = channel_desc(x.shape()[1]);
-  std::unordered_map<int, dnnl::memory> args = {
-      {DNNL_ARG_SRC, tensor_memory(x, md)},
-      {DNNL_ARG_DST, tensor_memory(y, md)},
-      {DNNL_ARG_MEAN, tensor_memory(running_mean, cmd)},
-      {DNNL_ARG_VARIANCE, tensor_memory(running_var, cmd)}};
-  if (gamma.defined()) args[DNNL_ARG_SCALE] = tensor_memory(gamma, cmd);
-  if (beta.defined()) args[DNNL_ARG_SHIFT] = tensor_memory(beta, cmd);
-  e.prim.execute(cpu_stream(), args);
-  cpu_stream().wait();
 }
 
 // in {x, gamma?, beta?, running_mean, running_var}, out {y, mean, invstd}; BatchNormParams.

@@ -10,7 +10,10 @@
 //   ours_nowcache  ours with the reordered-weight cache off (weights reordered on every call);
 //   ours_nochunk   ours without batch chunking (whole-batch reorders; oneDNN convolutions only);
 //   ours_onednn    depthwise shapes on oneDNN primitives + reorders instead of the hand-written
-//                  NCHW kernel.
+//                  NCHW kernel;
+//   ours_blocked   depthwise shapes on the hand-written kernel's channel-interleaved AVX-512
+//                  implementation at every stride (the default picks per stride);
+//   ours_portable  depthwise shapes on its portable implementation.
 // bench/compare_conv.sh runs it and prints the table "shape pass ours raw ratio".
 #include <benchmark/benchmark.h>
 #include <oneapi/dnnl/dnnl.hpp>
@@ -25,6 +28,7 @@
 #include "engine/random.h"
 #include "engine/tensor.h"
 #include "kernels/builtin_backends.h"
+#include "kernels/cpu/depthwise_conv2d.h"
 #include "kernels/cpu/onednn_context.h"
 #include "kernels/cpu/onednn_conv_family.h"
 
@@ -77,7 +81,7 @@ void set_flops(benchmark::State& state, const ConvShape& s) {
 
 // ---- Ours: through dispatch() on NCHW tensors ------------------------------------------------
 
-enum class Variant { ours, ours_nowcache, ours_nochunk, ours_onednn };
+enum class Variant { ours, ours_nowcache, ours_nochunk, ours_onednn, ours_blocked, ours_portable };
 const char* variant_name(Variant v) {
   switch (v) {
     case Variant::ours:
@@ -88,6 +92,10 @@ const char* variant_name(Variant v) {
       return "ours_nochunk";
     case Variant::ours_onednn:
       return "ours_onednn";
+    case Variant::ours_blocked:
+      return "ours_blocked";
+    case Variant::ours_portable:
+      return "ours_portable";
   }
   return "";
 }
@@ -108,11 +116,15 @@ struct VariantScope {
     onednn::set_conv_chunk_budget_override(v == Variant::ours_nochunk ? size_t{1} << 40
                                                                       : ours_chunk_budget());
     onednn::set_depthwise_kernel_override(v == Variant::ours_onednn ? 0 : -1);
+    cpu::set_depthwise_kernel(v == Variant::ours_portable  ? cpu::DepthwiseKernel::portable
+                              : v == Variant::ours_blocked ? cpu::DepthwiseKernel::blocked_avx512
+                                                           : cpu::DepthwiseKernel::automatic);
   }
   ~VariantScope() {
     onednn::set_weight_cache_enabled(true);
     onednn::set_conv_chunk_budget_override(0);
     onednn::set_depthwise_kernel_override(-1);
+    cpu::set_depthwise_kernel(cpu::DepthwiseKernel::automatic);
   }
 };
 
@@ -247,7 +259,9 @@ void register_all() {
           ->Unit(benchmark::kMillisecond)
           ->UseRealTime();
       std::vector<Variant> variants = {Variant::ours};
-      if (depthwise) variants.push_back(Variant::ours_onednn);
+      if (depthwise)
+        variants.insert(variants.end(),
+                        {Variant::ours_onednn, Variant::ours_blocked, Variant::ours_portable});
       // Chunking and the weight cache only concern oneDNN convolutions (not the depthwise
       // kernel, nor pointwise ones, which run as matmuls on NCHW).
       const bool convolution = !depthwise && s.k > 1;

@@ -169,6 +169,15 @@ const std::vector<ConvCase>& conv_cases() {
        false},
       {"depthwise 3x3 s2 wide rows", 1, 16, 6, 40, 16, 3, 3, conv_params(2, 1, 1, 1, 1, 1, 16),
        true},
+      // The direct kernel: 31 rows (bands of 16, 8, 4, 2, 1), dilated taps (runs with gaps),
+      // 11 taps a column (runs split at 8), stride 2 with odd sizes and uneven pads.
+      {"depthwise 5x5 s1 31 rows", 1, 16, 31, 21, 16, 5, 5, conv_params(1, 2, 2, 2, 2, 1, 16),
+       true},
+      {"depthwise 3x3 dilation 3", 2, 16, 13, 17, 16, 3, 3, conv_params(1, 3, 3, 3, 3, 3, 16),
+       true},
+      {"depthwise 11x11 s1", 1, 16, 14, 18, 16, 11, 11, conv_params(1, 5, 5, 5, 5, 1, 16), false},
+      {"depthwise 5x5 s2 odd sizes", 2, 16, 17, 35, 16, 5, 5, conv_params(2, 1, 2, 2, 1, 1, 16),
+       true},
       {"blocked channels 32->48", 2, 32, 12, 10, 48, 3, 3, conv_params(1, 1, 1, 1, 1), true},
       {"channels 20->24 7x7", 2, 20, 11, 9, 24, 7, 7, conv_params(1, 3, 3, 3, 3), true},
       {"1x1 expansion 24->96", 3, 24, 5, 6, 96, 1, 1, conv_params(1, 0, 0, 0, 0), false},
@@ -233,12 +242,27 @@ TEST(OnednnConv, MatchesReferenceAllCases) {
 
 // The same cases through the other plans: the default sends depthwise convolutions to the
 // hand-written kernel and pointwise ones to matmuls; these run them on oneDNN convolutions too.
-// The depthwise cases again with the AVX-512 depthwise kernel switched off, so the portable one
-// is checked too on a CPU that has AVX-512 (on one without, both runs take the portable path).
+// The depthwise cases again on each of the depthwise kernel's implementations (the default picks
+// one per stride), so each is checked on every shape; on a CPU without AVX-512 every run takes
+// the portable path.
+struct DepthwiseKernelOverride {
+  explicit DepthwiseKernelOverride(cpu::DepthwiseKernel k) { cpu::set_depthwise_kernel(k); }
+  ~DepthwiseKernelOverride() { cpu::set_depthwise_kernel(cpu::DepthwiseKernel::automatic); }
+};
+
 TEST(OnednnConv, MatchesReferenceWithPortableDepthwiseKernel) {
-  cpu::set_depthwise_avx512_allowed(false);
+  DepthwiseKernelOverride k(cpu::DepthwiseKernel::portable);
   for (const ConvCase& cc : conv_cases()) check_conv_case(cc);
-  cpu::set_depthwise_avx512_allowed(true);
+}
+
+TEST(OnednnConv, MatchesReferenceWithBlockedDepthwiseKernel) {
+  DepthwiseKernelOverride k(cpu::DepthwiseKernel::blocked_avx512);
+  for (const ConvCase& cc : conv_cases()) check_conv_case(cc);
+}
+
+TEST(OnednnConv, MatchesReferenceWithDirectDepthwiseKernel) {
+  DepthwiseKernelOverride k(cpu::DepthwiseKernel::direct_avx512);
+  for (const ConvCase& cc : conv_cases()) check_conv_case(cc);
 }
 
 TEST(OnednnConv, MatchesReferenceBatchSplitIntoChunks) {

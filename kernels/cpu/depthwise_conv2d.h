@@ -29,8 +29,17 @@ void depthwise_conv2d_backward_data(const DepthwiseGeometry& g, const float* gy,
 void depthwise_conv2d_backward_weight(const DepthwiseGeometry& g, const float* gy, const float* x,
                                       float* gw, float* gb);
 
-// Test and benchmark hook: false sends every channel to the portable implementation even on a
-// CPU with AVX-512 (true, the default, uses the AVX-512 one wherever the CPU has it).
-void set_depthwise_avx512_allowed(bool allowed);
+// Which implementation serves the channels (a test and benchmark hook; `automatic` is the default
+// and what the library uses):
+//   automatic       the fastest measured: on AVX-512, direct for forward and backward data at
+//                   unit stride, blocked otherwise; portable without AVX-512;
+//   portable        every pass on the portable implementation;
+//   blocked_avx512  every pass on the channel-interleaved AVX-512 implementation (channels in
+//                   whole vectors of 16; the rest portable);
+//   direct_avx512   forward and backward data on the AVX-512 NCHW implementation at every stride,
+//                   backward weights blocked.
+// The AVX-512 choices fall back to portable on a CPU without AVX-512F.
+enum class DepthwiseKernel { automatic, portable, blocked_avx512, direct_avx512 };
+void set_depthwise_kernel(DepthwiseKernel kernel);
 
 }  // namespace cvd::cpu

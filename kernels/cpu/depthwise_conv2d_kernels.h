@@ -4,6 +4,8 @@
 //   avx512:   16 channels per vector, planes transposed in cache into a channel-interleaved
 //             zero-padded block (the layout oneDNN's depthwise kernels use), register-blocked
 //             multiply-adds, transposed back; needs c1 - c0 to be a multiple of 16.
+//   direct:   AVX-512 on the NCHW planes themselves, every pass a stride-1 correlation over
+//             zero-padded stride phases (forward and backward data only).
 #pragma once
 #include <cstdint>
 
@@ -25,5 +27,10 @@ void backward_data_avx512(const DepthwiseGeometry& g, int64_t c0, int64_t c1, co
                           const float* w, float* gx);
 void backward_weight_avx512(const DepthwiseGeometry& g, int64_t c0, int64_t c1, const float* gy,
                             const float* x, float* gw, float* gb);
+
+void forward_direct_avx512(const DepthwiseGeometry& g, int64_t c0, int64_t c1, const float* x,
+                           const float* w, const float* b, float* y);
+void backward_data_direct_avx512(const DepthwiseGeometry& g, int64_t c0, int64_t c1,
+                                 const float* gy, const float* w, float* gx);
 
 }  // namespace cvd::cpu::depthwise

@@ -2,7 +2,7 @@
 //
 // A training step allocates and frees the same set of large activations every step. Served by
 // malloc, each block over glibc's mmap threshold is a fresh mapping whose every 4 KiB page faults
-// and is zeroed by the kernel on first touch: a Mannequin step at batch 8 spent 105 of its 270
+// and is zeroed by the kernel on first touch: three Mannequin steps at batch 8 spent 105 of their 270
 // CPU seconds in the kernel that way, and the page misses slowed the kernels too. So
 //  - blocks of at least kHostBlockCacheMinBytes freed by a tensor go on free lists (sixteen size
 //    classes per power of two) and serve later requests (best fit within 1.5x the class);

@@ -71,17 +71,38 @@ dnnl::memory zero_shift(const dnnl::memory::desc& cmd, int64_t c) {
   return dnnl::memory(cmd, cpu_engine(), zeros);
 }
 
+// What both hand-written forwards read: x and y as n * c planes, the optional affine.
+struct NormPlanes {
+  NormPlanes(const Tensor& x, const Tensor& gamma, const Tensor& beta, const Tensor& y)
+      : n(x.shape()[0]),
+        c(x.shape()[1]),
+        plane(c > 0 ? x.numel() / (n * c) : 0),
+        xp(x.data<float>()),
+        yp(y.data<float>()),
+        g(gamma.defined() ? gamma.data<float>() : nullptr),
+        b(beta.defined() ? beta.data<float>() : nullptr) {}
+  float gamma_at(int64_t ch) const { return g ? g[ch] : 1.0f; }
+  float beta_at(int64_t ch) const { return b ? b[ch] : 0.0f; }
+  int64_t n, c, plane;
+  const float* xp;
+  float* yp;
+  const float *g, *b;
+};
+
+// dst[k] = src[k] * scale + shift for k < count.
+void scale_shift(const float* src, float* dst, int64_t count, float scale, float shift) {
+#pragma omp simd
+  for (int64_t k = 0; k < count; ++k) dst[k] = src[k] * scale + shift;
+}
+
 // Training forward by hand: per channel, one pass for the batch mean, one for the (biased)
 // variance around it (per-plane float sums added in double), and one writing
 // y = (x - mean) * invstd * gamma + beta. var: c floats out.
 void batch_norm_train_forward(const Tensor& x, const Tensor& gamma, const Tensor& beta,
                               const Tensor& y, double eps, float* mean, float* var) {
-  const int64_t n = x.shape()[0], c = x.shape()[1];
-  const int64_t plane = c > 0 ? x.numel() / (n * c) : 0;
-  const float* xp = x.data<float>();
-  float* yp = y.data<float>();
-  const float* g = gamma.defined() ? gamma.data<float>() : nullptr;
-  const float* b = beta.defined() ? beta.data<float>() : nullptr;
+  const NormPlanes v(x, gamma, beta, y);
+  const int64_t n = v.n, c = v.c, plane = v.plane;
+  const float* xp = v.xp;
   cpu::parallel_ranges(c, 3 * n * plane, [&](int64_t c0, int64_t c1) {
     for (int64_t ch = c0; ch < c1; ++ch) {
       double sum = 0.0;
@@ -103,17 +124,14 @@ void batch_norm_train_forward(const Tensor& x, const Tensor& gamma, const Tensor
         for (int64_t k = 0; k < plane; ++k) s2 += (src[k] - mf) * (src[k] - mf);
         sum_sq += s2;
       }
-      const double v = sum_sq / count;
+      const double variance = sum_sq / count;
       mean[ch] = static_cast<float>(m);
-      var[ch] = static_cast<float>(v);
-      const double inv = 1.0 / std::sqrt(v + eps);
-      const float scale = static_cast<float>(inv * (g ? g[ch] : 1.0f));
-      const float shift = static_cast<float>((b ? b[ch] : 0.0f) - m * inv * (g ? g[ch] : 1.0f));
+      var[ch] = static_cast<float>(variance);
+      const double inv = 1.0 / std::sqrt(variance + eps);
+      const float scale = static_cast<float>(inv * v.gamma_at(ch));
+      const float shift = static_cast<float>(v.beta_at(ch) - m * inv * v.gamma_at(ch));
       for (int64_t i = 0; i < n; ++i) {
-        const float* src = xp + (i * c + ch) * plane;
-        float* dst = yp + (i * c + ch) * plane;
-#pragma omp simd
-        for (int64_t k = 0; k < plane; ++k) dst[k] = src[k] * scale + shift;
+        scale_shift(xp + (i * c + ch) * plane, v.yp + (i * c + ch) * plane, plane, scale, shift);
       }
     }
   });
@@ -129,25 +147,17 @@ struct BackwardEntry {
 void run_eval_forward(const Tensor& x, const Tensor& gamma, const Tensor& beta, const Tensor& y,
                       const Tensor& running_mean, const Tensor& running_var,
                       const BatchNormParams& p) {
-  const int64_t n = x.shape()[0], c = x.shape()[1];
-  const int64_t plane = c > 0 ? x.numel() / (n * c) : 0;
-  const float* xp = x.data<float>();
-  float* yp = y.data<float>();
-  const float* g = gamma.defined() ? gamma.data<float>() : nullptr;
-  const float* b = beta.defined() ? beta.data<float>() : nullptr;
+  const NormPlanes v(x, gamma, beta, y);
   const float* rm = running_mean.data<float>();
   const float* rv = running_var.data<float>();
-  cpu::parallel_ranges(n * c, plane, [&](int64_t r0, int64_t r1) {
+  cpu::parallel_ranges(v.n * v.c, v.plane, [&](int64_t r0, int64_t r1) {
     for (int64_t r = r0; r < r1; ++r) {
-      const int64_t ch = r % c;
+      const int64_t ch = r % v.c;
       const double inv = 1.0 / std::sqrt(static_cast<double>(rv[ch]) + p.eps);
-      const double gs = inv * (g ? g[ch] : 1.0f);
+      const double gs = inv * v.gamma_at(ch);
       const float scale = static_cast<float>(gs);
-      const float shift = static_cast<float>((b ? b[ch] : 0.0f) - rm[ch] * gs);
-      const float* src = xp + r * plane;
-      float* dst = yp + r * plane;
-#pragma omp simd
-      for (int64_t k = 0; k < plane; ++k) dst[k] = src[k] * scale + shift;
+      const float shift = static_cast<float>(v.beta_at(ch) - rm[ch] * gs);
+      scale_shift(v.xp + r * v.plane, v.yp + r * v.plane, v.plane, scale, shift);
     }
   });
 }

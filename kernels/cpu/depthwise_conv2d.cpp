@@ -14,6 +14,8 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <vector>
 
@@ -250,7 +252,24 @@ void backward_weight_portable(const DepthwiseGeometry& g, int64_t c0, int64_t c1
 
 namespace {
 
-std::atomic<DepthwiseKernel> g_kernel{DepthwiseKernel::automatic};
+// CVD_DEPTHWISE_KERNEL=portable|blocked|direct sets the start value (to measure one against the
+// others in a whole network); unset or anything else: automatic (another value is reported once).
+DepthwiseKernel kernel_from_environment() {
+  const char* v = std::getenv("CVD_DEPTHWISE_KERNEL");
+  if (v == nullptr || *v == '\0' || std::strcmp(v, "automatic") == 0) {
+    return DepthwiseKernel::automatic;
+  }
+  if (std::strcmp(v, "portable") == 0) return DepthwiseKernel::portable;
+  if (std::strcmp(v, "blocked") == 0) return DepthwiseKernel::blocked_avx512;
+  if (std::strcmp(v, "direct") == 0) return DepthwiseKernel::direct_avx512;
+  std::fprintf(stderr,
+               "cvd: CVD_DEPTHWISE_KERNEL=%s is not one of automatic, portable, blocked, direct; "
+               "using automatic\n",
+               v);
+  return DepthwiseKernel::automatic;
+}
+
+std::atomic<DepthwiseKernel> g_kernel{kernel_from_environment()};
 
 // The implementation for forward and backward data (`automatic` resolved): on AVX-512, direct
 // for unit stride, blocked for larger strides. Measured (bench/compare_conv.sh, MiDaS small's

@@ -38,7 +38,8 @@ void depthwise_conv2d_backward_weight(const DepthwiseGeometry& g, const float* g
 //                   whole vectors of 16; the rest portable);
 //   direct_avx512   forward and backward data on the AVX-512 NCHW implementation at every stride,
 //                   backward weights blocked.
-// The AVX-512 choices fall back to portable on a CPU without AVX-512F.
+// The AVX-512 choices fall back to portable on a CPU without AVX-512F. The environment variable
+// CVD_DEPTHWISE_KERNEL=portable|blocked|direct sets the choice at start-up.
 enum class DepthwiseKernel { automatic, portable, blocked_avx512, direct_avx512 };
 void set_depthwise_kernel(DepthwiseKernel kernel);
 

@@ -8,9 +8,7 @@
 #include <immintrin.h>
 
 #include <algorithm>
-#include <cstdlib>
 #include <cstring>
-#include <memory>
 #include <vector>
 
 #include "kernels/cpu/cpu_parallel.h"
@@ -32,27 +30,6 @@ namespace {
 
 constexpr int64_t L = 16;  // channels per vector
 constexpr int U = 8;       // output pixels accumulated in registers
-
-// A 64-byte aligned float buffer that grows on demand.
-class Buffer {
- public:
-  float* get(int64_t floats) {
-    if (floats > size_) {
-      const size_t bytes = (static_cast<size_t>(floats) * sizeof(float) + 63) / 64 * 64;
-      data_.reset(static_cast<float*>(std::aligned_alloc(64, bytes)));
-      if (!data_) throw std::bad_alloc();
-      size_ = floats;
-    }
-    return data_.get();
-  }
-
- private:
-  struct Free {
-    void operator()(float* p) const { std::free(p); }
-  };
-  std::unique_ptr<float, Free> data_;
-  int64_t size_ = 0;
-};
 
 // Rows x columns of the zero-padded input every output pixel and tap reads from.
 struct PaddedInput {
@@ -525,7 +502,7 @@ void forward_avx512(const DepthwiseGeometry& g, int64_t c0, int64_t c1, const fl
   const PaddedInput pi = padded_input(g);
   const int64_t taps = g.kh * g.kw, blocks = (c1 - c0) / L;
   parallel_ranges(g.n * blocks, g.oh * g.ow * L * taps, [&](int64_t begin, int64_t end) {
-    Buffer in_buf, w_buf;
+    AlignedFloatBuffer in_buf, w_buf;
     float* in = in_buf.get(pi.hp * pi.wp * L);
     float* wb = w_buf.get(taps * L);
     zero_border(in, pi.hp, pi.wp, g.pad_top, g.h, g.pad_left, g.w);
@@ -544,7 +521,7 @@ void backward_data_avx512(const DepthwiseGeometry& g, int64_t c0, int64_t c1, co
   const GradLayout gl = grad_layout(g);
   const int64_t taps = g.kh * g.kw, blocks = (c1 - c0) / L;
   parallel_ranges(g.n * blocks, g.oh * g.ow * L * taps, [&](int64_t begin, int64_t end) {
-    Buffer grad_buf, out_buf, w_buf;
+    AlignedFloatBuffer grad_buf, out_buf, w_buf;
     float* grad = grad_buf.get(g.oh * gl.wg * L);
     float* out = out_buf.get(g.h * g.w * L);
     float* wb = w_buf.get(taps * L);
@@ -571,7 +548,7 @@ void backward_weight_avx512(const DepthwiseGeometry& g, int64_t c0, int64_t c1, 
       g.n * blocks, g.oh * g.ow * L * taps, slots, [&](int t, int64_t begin, int64_t end) {
         std::vector<double>& s = sums[static_cast<size_t>(t)];
         s.assign(static_cast<size_t>(nch * (taps + 1)), 0.0);
-        Buffer in_buf, grad_buf;
+        AlignedFloatBuffer in_buf, grad_buf;
         float* in = in_buf.get(pi.hp * pi.wp * L);
         float* grad = grad_buf.get(g.oh * g.ow * L);
         zero_border(in, pi.hp, pi.wp, g.pad_top, g.h, g.pad_left, g.w);

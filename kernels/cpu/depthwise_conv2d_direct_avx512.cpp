@@ -20,9 +20,7 @@
 #include <immintrin.h>
 
 #include <algorithm>
-#include <cstdlib>
 #include <cstring>
-#include <memory>
 #include <vector>
 
 #include "kernels/cpu/cpu_parallel.h"
@@ -179,21 +177,12 @@ Plan backward_data_plan(const DepthwiseGeometry& g) {
   return p;
 }
 
-// A 64-byte aligned, zero-initialised float buffer.
-struct AlignedFloats {
-  explicit AlignedFloats(int64_t n) {
-    const size_t bytes =
-        (static_cast<size_t>(std::max<int64_t>(n, 1)) * sizeof(float) + 63) / 64 * 64;
-    data.reset(static_cast<float*>(std::aligned_alloc(64, bytes)));
-    if (!data) throw std::bad_alloc();
-    std::memset(data.get(), 0, bytes);
-  }
-  struct Free {
-    void operator()(float* p) const { std::free(p); }
-  };
-  std::unique_ptr<float, Free> data;
-  float* get() const { return data.get(); }
-};
+// A zeroed 64-byte aligned buffer of n floats (the zero padding of the source planes).
+float* zeroed(AlignedFloatBuffer& buffer, int64_t n) {
+  float* p = buffer.get(n);
+  std::memset(p, 0, static_cast<size_t>(n) * sizeof(float));
+  return p;
+}
 
 inline __mmask16 first_lanes(int64_t n) {
   return n >= L ? static_cast<__mmask16>(0xffff) : static_cast<__mmask16>((1u << n) - 1);
@@ -267,25 +256,13 @@ CVD_AVX512 void correlate_rows(const Plan& p, const Grid& grid, const float* src
 // channel (group_weights).
 CVD_AVX512 void correlate(const Plan& p, const Grid& grid, const float* src, const float* wg,
                           float bias, float* dst, int64_t dst_pitch) {
-  switch (grid.m) {
-    case 0:  // no taps: the bias alone
-    case 1:
-      return correlate_rows<1>(p, grid, src, wg, bias, dst, dst_pitch);
-    case 2:
-      return correlate_rows<2>(p, grid, src, wg, bias, dst, dst_pitch);
-    case 3:
-      return correlate_rows<3>(p, grid, src, wg, bias, dst, dst_pitch);
-    case 4:
-      return correlate_rows<4>(p, grid, src, wg, bias, dst, dst_pitch);
-    case 5:
-      return correlate_rows<5>(p, grid, src, wg, bias, dst, dst_pitch);
-    case 6:
-      return correlate_rows<6>(p, grid, src, wg, bias, dst, dst_pitch);
-    case 7:
-      return correlate_rows<7>(p, grid, src, wg, bias, dst, dst_pitch);
-    default:
-      return correlate_rows<8>(p, grid, src, wg, bias, dst, dst_pitch);
-  }
+  using Rows =
+      void (*)(const Plan&, const Grid&, const float*, const float*, float, float*, int64_t);
+  // By run length; 0 (no taps: the bias alone) runs as 1 with zero weights.
+  static constexpr Rows by_run[kMaxRun + 1] = {
+      correlate_rows<1>, correlate_rows<1>, correlate_rows<2>, correlate_rows<3>, correlate_rows<4>,
+      correlate_rows<5>, correlate_rows<6>, correlate_rows<7>, correlate_rows<8>};
+  by_run[grid.m](p, grid, src, wg, bias, dst, dst_pitch);
 }
 
 // The group weights of every grid for channels [c0, c1): channel c's for grid k start at
@@ -402,7 +379,6 @@ CVD_AVX512 void store_phases(const DepthwiseGeometry& g, const Plan& p, const fl
 
 }  // namespace direct
 
-using direct::AlignedFloats;
 using direct::Grid;
 using direct::Plan;
 
@@ -414,11 +390,12 @@ void forward_direct_avx512(const DepthwiseGeometry& g, int64_t c0, int64_t c1, c
   const std::vector<float> wg = direct::group_weights(p, w, taps, c0, c1);
   parallel_ranges(g.n * nc, g.oh * g.ow * taps, [&](int64_t begin, int64_t end) {
     // Slack past the last plane: a band's last vector may read past its row.
-    AlignedFloats src(p.planes * p.plane_size() + p.pitch + direct::L);
+    AlignedFloatBuffer src_buf;
+    float* src = direct::zeroed(src_buf, p.planes * p.plane_size() + p.pitch + direct::L);
     for (int64_t i = begin; i < end; ++i) {
       const int64_t c = c0 + i % nc, plane = (i / nc) * g.c + c;
-      direct::load_phases(g, p, x + plane * g.h * g.w, src.get());
-      direct::correlate(p, grid, src.get(), wg.data() + (c - c0) * wstride, b ? b[c] : 0.0f,
+      direct::load_phases(g, p, x + plane * g.h * g.w, src);
+      direct::correlate(p, grid, src, wg.data() + (c - c0) * wstride, b ? b[c] : 0.0f,
                         y + plane * g.oh * g.ow, g.ow);
     }
   });
@@ -432,25 +409,27 @@ void backward_data_direct_avx512(const DepthwiseGeometry& g, int64_t c0, int64_t
   const int64_t wstride = direct::group_weights_stride(p);
   const std::vector<float> wg = direct::group_weights(p, w, taps, c0, c1);
   parallel_ranges(g.n * nc, g.h * g.w * taps, [&](int64_t begin, int64_t end) {
-    AlignedFloats src(p.plane_size() + p.pitch + direct::L), out(grids * grid_stride + direct::L);
+    AlignedFloatBuffer src_buf, out_buf;
+    float* src = direct::zeroed(src_buf, p.plane_size() + p.pitch + direct::L);
+    float* out = out_buf.get(grids * grid_stride + direct::L);
     const bool unit_stride = g.stride_h == 1 && g.stride_w == 1;
     for (int64_t i = begin; i < end; ++i) {
       const int64_t c = c0 + i % nc, plane = (i / nc) * g.c + c;
       const float* gplane = gy + plane * g.oh * g.ow;
       for (int64_t oy = 0; oy < g.oh; ++oy) {
-        std::memcpy(src.get() + (p.top + oy) * p.pitch + p.left, gplane + oy * g.ow,
+        std::memcpy(src + (p.top + oy) * p.pitch + p.left, gplane + oy * g.ow,
                     g.ow * sizeof(float));
       }
       if (unit_stride) {  // one grid: the input-gradient plane itself
-        direct::correlate(p, p.grids[0], src.get(), wg.data() + (c - c0) * wstride, 0.0f,
+        direct::correlate(p, p.grids[0], src, wg.data() + (c - c0) * wstride, 0.0f,
                           gx + plane * g.h * g.w, g.w);
         continue;
       }
       for (int64_t k = 0; k < grids; ++k) {
-        direct::correlate(p, p.grids[k], src.get(), wg.data() + ((c - c0) * grids + k) * wstride,
-                          0.0f, out.get() + k * grid_stride, p.pitch);
+        direct::correlate(p, p.grids[k], src, wg.data() + ((c - c0) * grids + k) * wstride, 0.0f,
+                          out + k * grid_stride, p.pitch);
       }
-      direct::store_phases(g, p, out.get(), grid_stride, gx + plane * g.h * g.w);
+      direct::store_phases(g, p, out, grid_stride, gx + plane * g.h * g.w);
     }
   });
 }

@@ -22,6 +22,7 @@
 #include "pipeline/eval/eval_run.h"
 #include "pipeline/io/image_io.h"
 #include "pipeline/io/pfm_io.h"
+#include "pipeline/io/sparse_depth_io.h"
 #include "pipeline/io/trajectory_io.h"
 #include "tests/test_support.h"
 
@@ -494,6 +495,39 @@ TEST(EvalRun, ScaledRunAgainstDemoGt) {
   EXPECT_FALSE(r2.metrics.contains("depth"));
   EXPECT_FALSE(r2.metrics.contains("pose"));
   EXPECT_TRUE(r2.metrics["consistency"].contains("instability"));
+}
+
+// The run's sparse points: read from sparse_depth.csv.gz (what runs write), or from the
+// uncompressed sparse_depth.csv of older runs when that is all there is.
+TEST(EvalRun, SparsePointsCompressedOrFromOlderRuns) {
+  test::TempDir tmp;
+  PlaneScene sc(4);
+  write_scene(sc, tmp / "gt", tmp / "run", 2.0);
+  // Points on the run's own depth (half the GT's): exact up to the one scale.
+  std::map<std::string, SparseDepthFrame> pts;
+  for (size_t k = 0; k < sc.depth.size(); ++k) {
+    SparseDepthFrame& f = pts[fmt::format("frame_{:06d}", k)];
+    f.width = sc.depth[k].cols, f.height = sc.depth[k].rows;
+    for (int y = 2; y < f.height; y += 7)
+      for (int x = 3; x < f.width; x += 9)
+        f.points.push_back({double(x), double(y), sc.depth[k].at<float>(y, x) / 2.0});
+  }
+  // An older file with a wrong point in every frame: used only when it is the only file.
+  std::map<std::string, SparseDepthFrame> old = pts;
+  for (auto& [name, f] : old) f.points.front().z *= 3;
+  write_sparse_depth_csv(tmp / "run" / kSparseDepthFileUncompressed, old);
+  EvalRunOptions o;
+  o.pred_dir = tmp / "run";
+  o.gt_dir = tmp / "gt";
+  const EvalOutcome from_old = evaluate_run(o);
+  ASSERT_TRUE(from_old.metrics.contains("sparse"));
+  EXPECT_GT(from_old.metrics["sparse"]["abs_rel"].get<double>(), 1e-3);
+  write_sparse_depth_csv(tmp / "run" / kSparseDepthFile, pts);
+  const EvalOutcome r = evaluate_run(o);
+  ASSERT_TRUE(r.metrics.contains("sparse"));
+  EXPECT_EQ(r.metrics["sparse"]["frames"], 4);
+  EXPECT_NEAR(r.metrics["sparse"]["abs_rel"].get<double>(), 0.0, 1e-6);
+  EXPECT_NEAR(r.metrics["sparse"]["abs_rel_video"].get<double>(), 0.0, 1e-6);
 }
 
 TEST(EvalRun, SevenScenesGtAtHalfScale) {

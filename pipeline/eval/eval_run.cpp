@@ -84,7 +84,8 @@ static void evaluate_depth(const EvalSequence& pred, const EvalSequence& gt,
           errors_json(evaluate_video_depth(ps, gs, a, s, opt.depth));
   out.metrics["depth"] = depth;
   // The run's sparse points (SfM or flow-triangulated) on the same GT, when the run kept them.
-  const fs::path sparse_csv = opt.pred_dir / "sparse_depth.csv";
+  fs::path sparse_csv = opt.pred_dir / kSparseDepthFile;
+  if (!fs::exists(sparse_csv)) sparse_csv = opt.pred_dir / kSparseDepthFileUncompressed;
   if (fs::exists(sparse_csv)) {
     std::vector<std::string> names;
     for (auto& m : matches) names.push_back(pred.frames[m.pred].name);

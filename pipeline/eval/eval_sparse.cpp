@@ -1,88 +1,13 @@
-// Sparse SfM depth vs GT depth: reader/writer of sparse_depth.csv and its metrics. See
-// eval_sparse.h.
+// Sparse SfM depth vs GT depth: the metrics of a run's sparse points. See eval_sparse.h.
 #include "pipeline/eval/eval_sparse.h"
-
-#include <fmt/format.h>
 
 #include <algorithm>
 #include <cmath>
-#include <fstream>
-#include <sstream>
 
 #include "engine/error.h"
 #include "pipeline/geometry/median.h"
-#include "pipeline/io/atomic_file.h"
-
-namespace fs = std::filesystem;
 
 namespace cvd {
-
-namespace {
-
-constexpr const char* kHeader = "frame,width,height,u,v,z";
-
-}  // namespace
-
-std::map<std::string, SparseDepthFrame> read_sparse_depth_csv(const fs::path& path) {
-  std::ifstream in(path);
-  if (!in) fail(ErrorCategory::io, "{}: cannot open", path.string());
-  std::map<std::string, SparseDepthFrame> out;
-  std::string line;
-  int line_no = 0;
-  while (std::getline(in, line)) {
-    ++line_no;
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    if (line.empty()) continue;
-    if (line_no == 1) {
-      if (line != kHeader)
-        fail(ErrorCategory::format, "{}: line 1 must be the header '{}', got '{}'", path.string(),
-             kHeader, line.substr(0, 80));
-      continue;
-    }
-    auto comma = line.find(',');
-    if (comma == std::string::npos || comma == 0)
-      fail(ErrorCategory::format, "{}:{}: expected 'frame,width,height,u,v,z'", path.string(),
-           line_no);
-    std::string name = line.substr(0, comma);
-    std::string rest = line.substr(comma + 1);
-    std::replace(rest.begin(), rest.end(), ',', ' ');
-    std::istringstream ss(rest);
-    int w = 0, h = 0;
-    SparseDepthPoint p;
-    std::string extra;
-    if (!(ss >> w >> h >> p.u >> p.v >> p.z) || (ss >> extra))
-      fail(ErrorCategory::format, "{}:{}: expected 'frame,width,height,u,v,z'", path.string(),
-           line_no);
-    if (w <= 0 || h <= 0 || !std::isfinite(p.u) || !std::isfinite(p.v) || !std::isfinite(p.z) ||
-        p.z <= 0)
-      fail(ErrorCategory::format,
-           "{}:{}: size must be positive and u, v, z finite with z > 0 (got {}x{}, z {})",
-           path.string(), line_no, w, h, p.z);
-    SparseDepthFrame& f = out[name];
-    if (f.points.empty()) {
-      f.width = w;
-      f.height = h;
-    } else if (f.width != w || f.height != h) {
-      fail(ErrorCategory::format, "{}:{}: frame '{}' changes size from {}x{} to {}x{}",
-           path.string(), line_no, name, f.width, f.height, w, h);
-    }
-    f.points.push_back(p);
-  }
-  if (line_no == 0) fail(ErrorCategory::format, "{}: empty file (no header)", path.string());
-  return out;
-}
-
-void write_sparse_depth_csv(const fs::path& path,
-                            const std::map<std::string, SparseDepthFrame>& frames) {
-  std::string s = std::string(kHeader) + "\n";
-  for (const auto& [name, f] : frames) {
-    CVD_CHECK(name.find(',') == std::string::npos, "sparse_depth.csv: frame name '{}' has a comma",
-              name);
-    for (const auto& p : f.points)
-      s += fmt::format("{},{},{},{:.3f},{:.3f},{:.9g}\n", name, f.width, f.height, p.u, p.v, p.z);
-  }
-  write_text_file(path, s);
-}
 
 SparseDepthEval evaluate_sparse_depth(const std::map<std::string, SparseDepthFrame>& sparse,
                                       const std::vector<std::string>& names,

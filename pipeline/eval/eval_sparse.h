@@ -1,12 +1,7 @@
 // The sparse 3-D points a run started from (COLMAP's, or triangulated from flow when the poses
 // were given), judged against GT depth: how dense they are and how accurate, so a table can set
 // the dense network output beside the SfM points it was calibrated on.
-//
-// File `sparse_depth.csv` of a run directory, one line per point as the frame observes it:
-//   frame,width,height,u,v,z
-// frame = frame name, width x height = the depth-map resolution at which u, v (pixels, x right,
-// y down, pixel centres at integers) are given, z = depth along the optical axis in the run's
-// pose units (only ratios matter: the metrics align each frame's scale to GT).
+// The file and its reader: pipeline/io/sparse_depth_io.h.
 #pragma once
 #include <opencv2/core.hpp>
 
@@ -15,23 +10,9 @@
 #include <string>
 #include <vector>
 
+#include "pipeline/io/sparse_depth_io.h"
+
 namespace cvd {
-
-struct SparseDepthPoint {
-  double u = 0, v = 0, z = 0;
-};
-
-struct SparseDepthFrame {
-  int width = 0, height = 0;  // resolution of u, v
-  std::vector<SparseDepthPoint> points;
-};
-
-// By frame name. Throws Error(format) naming the file and line for a malformed line, Error(io)
-// when unreadable.
-std::map<std::string, SparseDepthFrame> read_sparse_depth_csv(const std::filesystem::path& path);
-// Writes the file atomically (header line included).
-void write_sparse_depth_csv(const std::filesystem::path& path,
-                            const std::map<std::string, SparseDepthFrame>& frames);
 
 struct SparseDepthEval {
   int frames = 0;            // frames with >= 1 point on valid GT

@@ -182,10 +182,10 @@ void write_videos(const fs::path& out, const RunOutputs& r) {
 
 const std::vector<std::string>& run_output_names() {
   static const std::vector<std::string> names = {
-      "depth",     "depth_png16",      "depth_color",      "depth_initial",
-      "poses.txt", "colmap",           "intrinsics.json",  "points.ply",
-      "depth.mp4", "side_by_side.mp4", "sparse_depth.csv", "run.json",
-      "depth.npy", "frames.txt",       "viewer.html"};
+      "depth",     "depth_png16",      "depth_color",         "depth_initial",
+      "poses.txt", "colmap",           "intrinsics.json",     "points.ply",
+      "depth.mp4", "side_by_side.mp4", "sparse_depth.csv.gz", "sparse_depth.csv",
+      "run.json",  "depth.npy",        "frames.txt",          "viewer.html"};
   return names;
 }
 

@@ -50,7 +50,8 @@ void write_videos(const std::filesystem::path& out, const RunOutputs& r);
 std::pair<double, double> video_inverse_depth_range(const std::vector<cv::Mat>& depths);
 cv::Mat colorize_depth(const cv::Mat& depth, std::pair<double, double> inv_range);
 
-// The names above (plus depth_initial/, sparse_depth.csv), which a run writes into `out`.
+// The names above (plus depth_initial/, sparse_depth.csv.gz and the sparse_depth.csv of older
+// runs), which a run writes into `out`.
 const std::vector<std::string>& run_output_names();
 
 // Created before a run starts writing its outputs: unless commit() is called, its destructor

@@ -243,18 +243,15 @@ RunResult run_pipeline(const RunOptions& o) {
   write_cameras(o.out, outs);
   if (o.write_point_cloud) write_point_cloud(o.out / "points.ply", outs);
   if (o.write_videos) write_videos(o.out, outs);
-  {
-    std::map<std::string, SparseDepthFrame> sd;
+  // The uncompressed file of a run before 2026-12-06 into the same folder would be stale.
+  fs::remove(o.out / kSparseDepthFileUncompressed);
+  write_sparse_depth_csv(o.out / kSparseDepthFile, [&](SparseDepthCsvWriter& w) {
     for (int k = 0; k < n; ++k) {
       const SparseDepth& sp = initial.sparse[k];
-      if (sp.z.empty()) continue;
-      SparseDepthFrame& f = sd[frames.names[k]];
-      f.width = cams[k].intrinsics.width;
-      f.height = cams[k].intrinsics.height;
-      for (size_t q = 0; q < sp.z.size(); ++q) f.points.push_back({sp.u[q], sp.v[q], sp.z[q]});
+      w.add_frame(frames.names[k], cams[k].intrinsics.width, cams[k].intrinsics.height, sp.u.data(),
+                  sp.v.data(), sp.z.data(), sp.z.size());
     }
-    write_sparse_depth_csv(o.out / "sparse_depth.csv", sd);
-  }
+  });
   fs::create_directories(o.out / "depth_initial");
   for (int k = 0; k < n; ++k)
     write_pfm(o.out / "depth_initial" / (frames.names[k] + ".pfm"), initial.depths[k]);
@@ -294,7 +291,7 @@ RunResult run_pipeline(const RunOptions& o) {
     for (auto& sp : initial.sparse) count += static_cast<int64_t>(sp.z.size());
     info["sparse_points"] = {{"source", points.from_sfm ? "sfm" : "flow triangulation"},
                              {"observations", count},
-                             {"file", "sparse_depth.csv"}};
+                             {"file", kSparseDepthFile}};
     if (!points.triangulation.is_null())
       info["sparse_points"]["triangulation"] = points.triangulation;
   }

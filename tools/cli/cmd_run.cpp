@@ -41,7 +41,7 @@ void print_summary(const RunResult& r, const RunOptions& o) {
              : f == "color" ? "depth_color/ "
                             : "depth.npy frames.txt ";
   fmt::print(
-      "outputs in {}: {}depth_initial/ poses.txt colmap/ intrinsics.json sparse_depth.csv{}{} "
+      "outputs in {}: {}depth_initial/ poses.txt colmap/ intrinsics.json sparse_depth.csv.gz{}{} "
       "run.json\n",
       o.out.string(), depth, o.write_point_cloud ? " points.ply" : "",
       o.write_videos ? " depth.mp4 side_by_side.mp4" : "");

@@ -88,12 +88,16 @@ for poses in $POSES; do
   # Rotation error between frames (RPE, mean degrees) at the smallest and largest frame step.
   rpe=$(jq -r 'if .pose and (.pose.rpe | length) > 0 then ([.pose.rpe[0], .pose.rpe[-1]] |
     map("\(.rot_mean_deg * 1000 | round / 1000) deg @\(.delta)") | join(", ")) else "-" end' "$final")
+  # Direction of the motion in the cameras' frames (RPE, mean degrees) at the largest frame step:
+  # what ATE's similarity fit can hide on a short path.
+  dir=$(jq -r 'if .pose and (.pose.rpe | length) > 0 and (.pose.rpe[-1].dir_mean_deg != null) then
+    (.pose.rpe[-1] | "\(.dir_mean_deg * 10 | round / 10) deg @\(.delta)") else "-" end' "$final")
   registered=$(jq -r '.frame_stats.registered' "$run/run.json")
   # Peak resident memory of cvd itself (run.json; absent from runs of older builds).
   rss=$(jq -r 'if .peak_rss_mb then ", peak RSS \(.peak_rss_mb.process | round) MB" else "" end' "$run/run.json")
   focal=""
   [[ -z "$INTRINSICS" ]] && focal=", focal $(jq -r '.poses.details.intrinsics.fx | round' "$run/run.json") px"
-  label="$poses ($registered/$FRAMES frames, ATE ${ate} cm, RPE rot ${rpe}${focal}, ${secs} s${rss})"
+  label="$poses ($registered/$FRAMES frames, ATE ${ate} cm, RPE rot ${rpe}, motion direction ${dir}${focal}, ${secs} s${rss})"
   row() {  # label, what, metrics file
     jq -r --arg l "$1" --arg w "$2" '[$l, $w,
       (.depth.median_frame.depth.abs_rel | . * 1000 | round / 1000 | tostring),

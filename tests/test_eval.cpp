@@ -222,6 +222,38 @@ TEST(EvalPose, RpeOfKnownPerturbation) {
   EXPECT_NEAR(rotation_angle_deg(Eigen::Matrix3d::Identity()), 0.0, 1e-12);
 }
 
+// The motion's direction in the first camera's frame: no similarity changes it, and a path
+// whose every step turns 90 degrees in the cameras' frames scores 90 however well its positions
+// align.
+TEST(EvalPose, RpeDirectionIgnoresSimilarityAndSeesSidewaysMotion) {
+  std::vector<Pose> gt = wavy_trajectory(20), est;
+  Sim3 S;
+  S.scale = 0.3;
+  S.R = Eigen::AngleAxisd(1.1, Eigen::Vector3d(0, 1, 2).normalized()).toRotationMatrix();
+  S.t = Eigen::Vector3d(4, 0, -1);
+  for (auto& g : gt) est.push_back(S.apply(g));
+  RelativePoseErrors same = relative_pose_error(est, gt, 3);
+  ASSERT_EQ(same.dir_pairs, 17);
+  EXPECT_NEAR(same.dir_mean_deg, 0.0, 1e-5);
+  // The same positions, every camera turned 90 degrees about its own motion-orthogonal axis:
+  // each step's motion, seen from the turned camera, is 90 degrees off.
+  std::vector<Pose> turned = gt;
+  for (size_t i = 0; i + 1 < gt.size(); ++i) {
+    const Eigen::Vector3d m = gt[i].R.transpose() * (gt[i + 1].t - gt[i].t);  // camera frame
+    const Eigen::Vector3d axis = m.unitOrthogonal();
+    turned[i].R = gt[i].R * Eigen::AngleAxisd(M_PI / 2, axis).toRotationMatrix();
+  }
+  RelativePoseErrors side = relative_pose_error(turned, gt, 1);
+  ASSERT_EQ(side.dir_pairs, 19);
+  EXPECT_NEAR(side.dir_mean_deg, 90.0, 1e-6);
+  // Positions are untouched: ATE sees nothing.
+  EXPECT_LT(absolute_trajectory_error(turned, gt, true).ate_rmse, 1e-9);
+  // A camera that does not move: no direction, the pair is left out.
+  std::vector<Pose> still = gt;
+  still[1].t = still[0].t;
+  EXPECT_EQ(relative_pose_error(still, gt, 1).dir_pairs, 18);
+}
+
 // ---- consistency metrics ------------------------------------------------------------------------
 
 TEST(EvalConsistency, JitteredTracksGiveKnownInstability) {

@@ -70,7 +70,7 @@ RelativePoseErrors relative_pose_error(const std::vector<Pose>& est, const std::
   CVD_CHECK(delta >= 1, "relative_pose_error: delta must be >= 1, got {}", delta);
   RelativePoseErrors r;
   r.delta = delta;
-  double tsq = 0, tsum = 0, rsum = 0, rsq = 0;
+  double tsq = 0, tsum = 0, rsum = 0, rsq = 0, dsum = 0;
   for (size_t i = 0; i + delta < est.size(); ++i) {
     Pose p0 = alignment.apply(est[i]), p1 = alignment.apply(est[i + delta]);
     Pose rel_est = p0.inverse() * p1;
@@ -82,7 +82,14 @@ RelativePoseErrors relative_pose_error(const std::vector<Pose>& est, const std::
     rsum += re;
     rsq += re * re;
     ++r.pairs;
+    const double ne = rel_est.t.norm(), ng = rel_gt.t.norm();
+    if (ne > 0 && ng > 0) {
+      const double c = std::clamp(rel_est.t.dot(rel_gt.t) / (ne * ng), -1.0, 1.0);
+      dsum += std::acos(c) * 180.0 / M_PI;
+      ++r.dir_pairs;
+    }
   }
+  if (r.dir_pairs > 0) r.dir_mean_deg = dsum / r.dir_pairs;
   if (r.pairs == 0) return r;
   r.trans_rmse = std::sqrt(tsq / r.pairs);
   r.trans_mean = tsum / r.pairs;

@@ -235,12 +235,14 @@ static std::string pose_section(const nlohmann::json& pose) {
       num(pose, "ate_rmse"), num(pose, "ate_mean"), num(pose, "ate_median"), num(pose, "ate_max"),
       num(pose.value("sim3", nlohmann::json::object()), "scale"), num(pose, "frames", "{:.0f}"));
   o += "<table><tr><th>RPE &Delta; (frames)</th><th>trans RMSE</th><th>trans mean</th>"
-       "<th>rot mean (deg)</th><th>rot RMSE (deg)</th><th>pairs</th></tr>\n";
+       "<th>rot mean (deg)</th><th>rot RMSE (deg)</th><th>motion direction mean (deg)</th>"
+       "<th>pairs</th></tr>\n";
   for (auto& r : pose.value("rpe", nlohmann::json::array()))
-    o +=
-        fmt::format("<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>\n",
-                    num(r, "delta", "{:.0f}"), num(r, "trans_rmse"), num(r, "trans_mean"),
-                    num(r, "rot_mean_deg"), num(r, "rot_rmse_deg"), num(r, "pairs", "{:.0f}"));
+    o += fmt::format(
+        "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>\n",
+        num(r, "delta", "{:.0f}"), num(r, "trans_rmse"), num(r, "trans_mean"),
+        num(r, "rot_mean_deg"), num(r, "rot_rmse_deg"), num(r, "dir_mean_deg"),
+        num(r, "pairs", "{:.0f}"));
   o += "</table>\n<div class=\"row\">";
   if (pose.contains("trajectory")) {
     std::vector<PlotSeries> top;

@@ -143,7 +143,9 @@ static void evaluate_poses(const EvalSequence& pred, const EvalSequence& gt,
                    {"trans_mean", e.trans_mean},
                    {"rot_mean_deg", e.rot_mean_deg},
                    {"rot_rmse_deg", e.rot_rmse_deg},
-                   {"pairs", e.pairs}});
+                   {"pairs", e.pairs},
+                   {"dir_mean_deg", e.dir_mean_deg},
+                   {"dir_pairs", e.dir_pairs}});
   }
   p["rpe"] = rpe;
   json tg = json::array(), te = json::array();

@@ -178,14 +178,6 @@ const std::vector<ConvCase>& conv_cases() {
       {"depthwise 11x11 s1", 1, 16, 14, 18, 16, 11, 11, conv_params(1, 5, 5, 5, 5, 1, 16), false},
       {"depthwise 5x5 s2 odd sizes", 2, 16, 17, 35, 16, 5, 5, conv_params(2, 1, 2, 2, 1, 1, 16),
        true},
-      // Narrow planes in pair chains (two rows a chain step): 20 columns at pitch 24 with an odd
-      // row count, 18 columns of a 3x3 at pitch 24, 36 rows (bands of 16 + 2 pairs).
-      {"depthwise 5x5 s1 rows of 20", 2, 16, 15, 20, 16, 5, 5, conv_params(1, 2, 2, 2, 2, 1, 16),
-       true},
-      {"depthwise 3x3 s1 rows of 18", 1, 16, 7, 18, 16, 3, 3, conv_params(1, 1, 1, 1, 1, 1, 16),
-       false},
-      {"depthwise 5x5 s1 36 rows of 20", 1, 16, 36, 20, 16, 5, 5, conv_params(1, 2, 2, 2, 2, 1, 16),
-       true},
       {"blocked channels 32->48", 2, 32, 12, 10, 48, 3, 3, conv_params(1, 1, 1, 1, 1), true},
       {"channels 20->24 7x7", 2, 20, 11, 9, 24, 7, 7, conv_params(1, 3, 3, 3, 3), true},
       {"1x1 expansion 24->96", 3, 24, 5, 6, 96, 1, 1, conv_params(1, 0, 0, 0, 0), false},

@@ -13,13 +13,6 @@
 // each source row the band needs is loaded once and multiplied into every output row it feeds
 // (a 5-tap column: 20 loads for 80 multiply-adds on a 16-row band), the group's weights held in
 // registers. The loads are unaligned, so they, not the multiply-adds, are what to save.
-// Narrow planes: a row of 20 pixels fills 20 of the 32 lanes of two vectors. When a pitch that
-// makes two rows a whole number of vectors wastes fewer lanes (20 pixels: pitch 24, two rows in
-// three vectors, 40 of 48 lanes), the grid is computed as "pair chains" instead: each vector
-// covers 16 consecutive pixels of the padded flat plane (spilling into the next row, whose
-// columns past the data are discarded), a chain steps two rows at a time, and each source row
-// still loaded once feeds every output row pair it reaches. The result goes to a buffer at the
-// padded pitch and is copied out.
 // Stride-2 phases are split and interleaved with two-vector permutes; other strides copy
 // element by element. Every stride is correct; the library sends only unit stride here (at
 // stride 2 the blocked implementation is faster, see depthwise_conv2d.cpp). Compiled with a
@@ -71,16 +64,14 @@ struct Grid {
 // p * plane_size + (top + a) * pitch + left + b.
 struct Plan {
   int64_t planes = 0, top = 0, left = 0, pitch = 0, rows = 0;
-  int64_t rows_per_step = 1;  // 2: the grid is computed in pair chains (narrow planes)
   std::vector<int64_t> src_rows, src_cols;  // data size of each source plane
   std::vector<Grid> grids;
   int64_t plane_size() const { return rows * pitch; }
   int64_t out_size() const {
     int64_t n = 0;
-    for (const Grid& g : grids) n = std::max(n, round_up(g.rows, rows_per_step) * pitch);
+    for (const Grid& g : grids) n = std::max(n, g.rows * pitch);
     return n;
   }
-  static int64_t round_up(int64_t a, int64_t b) { return (a + b - 1) / b * b; }
 };
 
 // Groups a grid's taps by (plane, dx) into runs of consecutive dy, all of the longest length.
@@ -125,21 +116,10 @@ void finish_plan(Plan& p) {
   }
   // Every kept output column reads inside its own source row; the data fits in a row.
   p.pitch = std::max(p.left + data_cols, out_cols + p.left + max_dx);
-  // One grid on one plane (unit stride): pair chains when a pitch of a multiple of 8 wastes
-  // fewer lanes than whole vectors per row, by at least 15% (20 columns: 20 / 24 against 20 / 32).
-  if (p.planes == 1 && p.grids.size() == 1 && out_rows >= 2) {
-    const double per_row = double(out_cols) / double(Plan::round_up(out_cols, L));
-    const int64_t pair_pitch = Plan::round_up(p.pitch, L / 2);
-    if (double(out_cols) / double(pair_pitch) > 1.15 * per_row) {
-      p.rows_per_step = 2;
-      p.pitch = pair_pitch;
-    }
-  }
   // Plus at least one row and 16 floats: a band's last vector may read past its row, and the
-  // stride-2 split writes up to 15 zeros past a row; pair chains compute one row past an odd
-  // count.
+  // stride-2 split writes up to 15 zeros past a row.
   p.rows = std::max(p.top + data_rows, out_rows + p.top + max_dy) +
-           std::max<int64_t>(1, (L + p.pitch - 1) / p.pitch) + (p.rows_per_step - 1);
+           std::max<int64_t>(1, (L + p.pitch - 1) / p.pitch);
 }
 
 // Number of indices i in [0, n) with i % s == r.
@@ -210,24 +190,23 @@ inline __mmask16 first_lanes(int64_t n) {
 
 #define CVD_AVX512_INLINE __attribute__((target("avx512f"), always_inline)) inline
 
-// acc[r] += sum_t w[t] * row (K r + t) of s (rows `pitch` apart), each row loaded once; K = 2
-// for pair chains.
-template <int R, int M, int K = 1>
+// acc[r] += sum_t w[t] * row (r + t) of s (rows `pitch` apart), each row loaded once.
+template <int R, int M>
 CVD_AVX512_INLINE void accumulate_run(const float* s, int64_t pitch, const float* w,
                                       __m512 (&acc)[R]) {
   __m512 wv[M];
 #pragma GCC unroll 8
   for (int t = 0; t < M; ++t) wv[t] = _mm512_set1_ps(w[t]);
-#pragma GCC unroll 40
-  for (int j = 0; j < K * (R - 1) + M; ++j) {
+#pragma GCC unroll 24
+  for (int j = 0; j < R + M - 1; ++j) {
     __m512 v = _mm512_loadu_ps(s + j * pitch);
     // Keeps v in a register: GCC would otherwise fold the load into each multiply-add that
     // uses it, loading (unaligned) the same row up to M times.
     asm("" : "+v"(v));
 #pragma GCC unroll 8
     for (int t = 0; t < M; ++t) {
-      const int d = j - t;
-      if (d >= 0 && d % K == 0 && d / K < R) acc[d / K] = _mm512_fmadd_ps(v, wv[t], acc[d / K]);
+      const int r = j - t;
+      if (r >= 0 && r < R) acc[r] = _mm512_fmadd_ps(v, wv[t], acc[r]);
     }
   }
 }
@@ -273,42 +252,6 @@ CVD_AVX512 void correlate_rows(const Plan& p, const Grid& grid, const float* src
   if (grid.rows - o >= 1) correlate_band<1, M>(p, grid, src, w, bias, o, dst, dst_pitch);
 }
 
-// Pair chains: output row pairs q0 .. q0 + R - 1, every vector of 16 flat pixels of a pair, into
-// out at the plan's pitch (row 2 q at out + 2 q * pitch; 2 * pitch is a multiple of 16).
-template <int R, int M>
-CVD_AVX512 void correlate_pair_band(const Plan& p, const Grid& grid, const float* src,
-                                    const float* wg, float bias, int64_t q0, float* out) {
-  for (int64_t c = 0; c < 2 * p.pitch; c += L) {
-    __m512 acc[R];
-#pragma GCC unroll 16
-    for (int r = 0; r < R; ++r) acc[r] = _mm512_set1_ps(bias);
-    for (size_t i = 0; i < grid.groups.size(); ++i) {
-      const TapGroup& t = grid.groups[i];
-      const float* s =
-          src + t.plane * p.plane_size() + (p.top + 2 * q0 + t.dy0) * p.pitch + p.left + c + t.dx;
-      accumulate_run<R, M, 2>(s, p.pitch, wg + i * kMaxRun, acc);
-    }
-#pragma GCC unroll 16
-    for (int r = 0; r < R; ++r) _mm512_storeu_ps(out + 2 * (q0 + r) * p.pitch + c, acc[r]);
-  }
-}
-
-// The whole grid in pair chains into out (bands of 16, 8, 4, 2, 1 row pairs), then its columns
-// copied to dst (rows dst_pitch apart).
-template <int M>
-CVD_AVX512 void correlate_pairs(const Plan& p, const Grid& grid, const float* src, const float* w,
-                                float bias, float* out, float* dst, int64_t dst_pitch) {
-  const int64_t pairs = (grid.rows + 1) / 2;
-  int64_t q = 0;
-  for (; q + 16 <= pairs; q += 16) correlate_pair_band<16, M>(p, grid, src, w, bias, q, out);
-  if (pairs - q >= 8) correlate_pair_band<8, M>(p, grid, src, w, bias, q, out), q += 8;
-  if (pairs - q >= 4) correlate_pair_band<4, M>(p, grid, src, w, bias, q, out), q += 4;
-  if (pairs - q >= 2) correlate_pair_band<2, M>(p, grid, src, w, bias, q, out), q += 2;
-  if (pairs - q >= 1) correlate_pair_band<1, M>(p, grid, src, w, bias, q, out);
-  for (int64_t r = 0; r < grid.rows; ++r)
-    std::memcpy(dst + r * dst_pitch, out + r * p.pitch, grid.cols * sizeof(float));
-}
-
 // dst (rows dst_pitch apart) = bias + the grid's correlation, wg: the group weights of one
 // channel (group_weights).
 CVD_AVX512 void correlate(const Plan& p, const Grid& grid, const float* src, const float* wg,
@@ -320,19 +263,6 @@ CVD_AVX512 void correlate(const Plan& p, const Grid& grid, const float* src, con
       correlate_rows<1>, correlate_rows<1>, correlate_rows<2>, correlate_rows<3>, correlate_rows<4>,
       correlate_rows<5>, correlate_rows<6>, correlate_rows<7>, correlate_rows<8>};
   by_run[grid.m](p, grid, src, wg, bias, dst, dst_pitch);
-}
-
-// The same for a plan in pair chains; out: work space of p.out_size() floats.
-CVD_AVX512 void correlate_in_pairs(const Plan& p, const Grid& grid, const float* src,
-                                   const float* wg, float bias, float* out, float* dst,
-                                   int64_t dst_pitch) {
-  using Pairs = void (*)(const Plan&, const Grid&, const float*, const float*, float, float*,
-                         float*, int64_t);
-  static constexpr Pairs by_run[kMaxRun + 1] = {
-      correlate_pairs<1>, correlate_pairs<1>, correlate_pairs<2>,
-      correlate_pairs<3>, correlate_pairs<4>, correlate_pairs<5>,
-      correlate_pairs<6>, correlate_pairs<7>, correlate_pairs<8>};
-  by_run[grid.m](p, grid, src, wg, bias, out, dst, dst_pitch);
 }
 
 // The group weights of every grid for channels [c0, c1): channel c's for grid k start at
@@ -460,19 +390,13 @@ void forward_direct_avx512(const DepthwiseGeometry& g, int64_t c0, int64_t c1, c
   const std::vector<float> wg = direct::group_weights(p, w, taps, c0, c1);
   parallel_ranges(g.n * nc, g.oh * g.ow * taps, [&](int64_t begin, int64_t end) {
     // Slack past the last plane: a band's last vector may read past its row.
-    AlignedFloatBuffer src_buf, out_buf;
+    AlignedFloatBuffer src_buf;
     float* src = direct::zeroed(src_buf, p.planes * p.plane_size() + p.pitch + direct::L);
-    float* out = p.rows_per_step == 2 ? out_buf.get(p.out_size()) : nullptr;
     for (int64_t i = begin; i < end; ++i) {
       const int64_t c = c0 + i % nc, plane = (i / nc) * g.c + c;
       direct::load_phases(g, p, x + plane * g.h * g.w, src);
-      const float* wc = wg.data() + (c - c0) * wstride;
-      float* yc = y + plane * g.oh * g.ow;
-      if (out) {
-        direct::correlate_in_pairs(p, grid, src, wc, b ? b[c] : 0.0f, out, yc, g.ow);
-      } else {
-        direct::correlate(p, grid, src, wc, b ? b[c] : 0.0f, yc, g.ow);
-      }
+      direct::correlate(p, grid, src, wg.data() + (c - c0) * wstride, b ? b[c] : 0.0f,
+                        y + plane * g.oh * g.ow, g.ow);
     }
   });
 }
@@ -497,13 +421,8 @@ void backward_data_direct_avx512(const DepthwiseGeometry& g, int64_t c0, int64_t
                     g.ow * sizeof(float));
       }
       if (unit_stride) {  // one grid: the input-gradient plane itself
-        const float* wc = wg.data() + (c - c0) * wstride;
-        if (p.rows_per_step == 2) {
-          direct::correlate_in_pairs(p, p.grids[0], src, wc, 0.0f, out, gx + plane * g.h * g.w,
-                                     g.w);
-        } else {
-          direct::correlate(p, p.grids[0], src, wc, 0.0f, gx + plane * g.h * g.w, g.w);
-        }
+        direct::correlate(p, p.grids[0], src, wg.data() + (c - c0) * wstride, 0.0f,
+                          gx + plane * g.h * g.w, g.w);
         continue;
       }
       for (int64_t k = 0; k < grids; ++k) {

@@ -119,7 +119,7 @@ std::map<std::string, SparseDepthFrame> read_sparse_depth_csv(const fs::path& pa
   return out;
 }
 
-void SparseDepthCsvWriter::write(const std::string& text) {
+void SparseDepthCsvWriter::write(std::string_view text) {
   if (text.empty()) return;
   if (gzwrite(file_, text.data(), static_cast<unsigned>(text.size())) !=
       static_cast<int>(text.size()))
@@ -135,9 +135,9 @@ void SparseDepthCsvWriter::add_frame(const std::string& name, int width, int hei
   for (size_t i = 0; i < n; ++i) {
     fmt::format_to(std::back_inserter(buf), "{},{},{},{:.3f},{:.3f},{:.9g}\n", name, width, height,
                    u[i], v[i], z[i]);
-    if (buf.size() >= (1u << 20)) write(fmt::to_string(buf)), buf.clear();
+    if (buf.size() >= (1u << 20)) write({buf.data(), buf.size()}), buf.clear();
   }
-  write(fmt::to_string(buf));
+  write({buf.data(), buf.size()});
 }
 
 void write_sparse_depth_csv(const fs::path& path,

@@ -13,6 +13,7 @@
 #include <functional>
 #include <map>
 #include <string>
+#include <string_view>
 #include <vector>
 
 struct gzFile_s;  // zlib's file handle (gzFile), opened in the .cpp
@@ -47,7 +48,7 @@ class SparseDepthCsvWriter {
   friend void write_sparse_depth_csv(const std::filesystem::path&,
                                      const std::function<void(SparseDepthCsvWriter&)>&);
   SparseDepthCsvWriter(gzFile_s* file, std::filesystem::path path) : file_(file), path_(path) {}
-  void write(const std::string& text);
+  void write(std::string_view text);
 
   gzFile_s* file_;
   std::filesystem::path path_;  // the target, for messages

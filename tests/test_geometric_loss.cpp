@@ -125,6 +125,42 @@ TEST(GeometricLoss, ZeroWhenDepthPosesAndFlowAgree) {
   EXPECT_GT(wrong.disparity.item(), 0.5);
 }
 
+// The same scene in another unit (depths and camera centres x 1000, as millimetres against
+// metres) gives the same loss, value and gradient per relative depth change, when the depth unit
+// follows; with a fixed unit the disparity term (1 / z) would shrink 1000-fold.
+TEST(GeometricLoss, DepthUnitMakesTheLossIndependentOfThePosesUnit) {
+  Fixture f = load();
+  const double k = 1000.0;
+  Fixture g = load();
+  g.ij.pose_i.t *= k;
+  g.ij.pose_j.t *= k;
+  g.ji.pose_i.t *= k;
+  g.ji.pose_j.t *= k;
+  g.di = mul_scalar(f.di, k);
+  g.dj = mul_scalar(f.dj, k);
+  g.opt.depth_unit = k * f.opt.depth_unit;
+  f.di.requires_grad_();
+  g.di.requires_grad_();
+  GeometricLoss a = geometric_loss_pair(f.di, f.dj, f.ij, f.ji, f.opt);
+  GeometricLoss b = geometric_loss_pair(g.di, g.dj, g.ij, g.ji, g.opt);
+  ASSERT_GT(a.disparity.item(), 1e-3);  // the fixture exercises the disparity term
+  EXPECT_NEAR(b.spatial.item(), a.spatial.item(), 1e-9 * a.spatial.item());
+  EXPECT_NEAR(b.disparity.item(), a.disparity.item(), 1e-9 * a.disparity.item());
+  EXPECT_NEAR(b.total.item(), a.total.item(), 1e-9 * a.total.item());
+  // d loss / d depth scales by 1 / k: the same step in relative depth.
+  const std::vector<double> ga = grad(a.total, {f.di})[0].to_vector();
+  const std::vector<double> gb = grad(b.total, {g.di})[0].to_vector();
+  for (size_t i = 0; i < ga.size(); ++i)
+    EXPECT_NEAR(gb[i] * k, ga[i], 1e-9 + 1e-7 * std::abs(ga[i])) << i;
+  // Without the unit the disparity term is k times smaller.
+  g.opt.depth_unit = f.opt.depth_unit;
+  GeometricLoss c = geometric_loss_pair(g.di, g.dj, g.ij, g.ji, g.opt);
+  EXPECT_NEAR(c.disparity.item() * k, a.disparity.item(), 1e-9 * a.disparity.item());
+  // A depth unit that is not a positive number is refused.
+  g.opt.depth_unit = 0;
+  EXPECT_THROW(geometric_loss_pair(g.di, g.dj, g.ij, g.ji, g.opt), Error);
+}
+
 // The before / after loss of a run is evaluated on every pair up to the cap and on evenly spaced
 // pairs beyond it: the first pair, strictly increasing, spread over the whole list.
 TEST(GeometricLoss, EvaluationPairsEvenlySpacedBeyondTheCap) {

@@ -10,6 +10,7 @@
 #include "engine/process_group.h"
 #include "models/depth_net_architectures.h"
 #include "pipeline/geometry/disparity_affine.h"
+#include "pipeline/geometry/median.h"
 #include "pipeline/geometry/scale_calibration.h"
 #include "pipeline/run/depth_inference.h"
 
@@ -126,11 +127,16 @@ InitialDepthStage run_initial_depth_stage(const RunOptions& o, DepthNet& net,
   st.sparse.resize(static_cast<size_t>(n));
   for (int k = 0; k < n; ++k)
     if (cams[k].registered) st.sparse[k] = project_points(cams[k], points.points[k]);
-  if (o.model.empty())
+  if (o.model.empty()) {
     st.calibration = start_network(o, net, load_frame, st.sparse, points.from_sfm);
+    st.depth_unit = st.calibration.at("initial_depth_level").get<double>();
+  }
   st.depths = infer_depths(net, load_frame, n, depth_size, o, "initial depth");
   if (!o.model.empty() && depth_net_architecture(net.arch()).affine_disparity) {
     st.calibration = calibrate_disparity_affine(net, st.depths, st.sparse);
+    std::vector<double> z;
+    for (const SparseDepth& s : st.sparse) z.insert(z.end(), s.z.begin(), s.z.end());
+    if (!z.empty()) st.depth_unit = upper_median(z);
   } else if (!o.model.empty()) {
     ScaleCalibrationResult sc = calibrate_scale(cams, st.depths, points.points);
     CVD_CHECK(sc.num_valid() > 0, "scale calibration: no frame has enough sparse points");

@@ -21,6 +21,12 @@ struct InitialDepthStage {
   std::vector<SparseDepth> sparse;  // per frame: the sparse points projected at the depth size
   std::vector<cv::Mat> depths;      // the network's depth before training (CV_32F)
   nlohmann::json calibration;       // what was done, for run.json
+  // The depth unit of the training loss (GeometricLossOptions::depth_unit): 1 where the cameras
+  // were calibrated to the network's units; where the network's depth takes the cameras' units
+  // (the default network, affine disparity), the median sparse depth (the default network's
+  // flat-plane level, its fallback level without points), so training does not depend on the
+  // unit the cameras come in.
+  double depth_unit = 1.0;
 };
 
 // `cams` at the depth resolution; a scale calibration rescales them. Several processes: rank 0

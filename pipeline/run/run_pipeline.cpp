@@ -207,7 +207,7 @@ RunResult run_pipeline(const RunOptions& o) {
   // 7. Test-time training
   t = Clock::now();
   const TrainingStage tr = run_training_stage(o, *net, load_frame, flow, usable, poses.source,
-                                              precision, cams, dsize, cache);
+                                              precision, cams, dsize, initial.depth_unit, cache);
   // The training steps alone; the loss before and after, evaluated on a fixed set of pairs, apart.
   timings["training"] = since(t) - tr.loss_evaluation_s;
   timings["loss_evaluation"] = tr.loss_evaluation_s;
@@ -307,6 +307,7 @@ RunResult run_pipeline(const RunOptions& o) {
                       {"batch_pairs", tr.batch_pairs},
                       {"lr", tr.lr},
                       {"lambda", tr.lambda},
+                      {"depth_unit", tr.depth_unit},
                       {"seed", o.seed},
                       {"precision", precision_name(precision)},
                       {"precision_unit",

@@ -10,6 +10,7 @@
 #include "models/depth_net_architectures.h"
 #include "pipeline/run/flow_pair_source.h"
 #include "pipeline/training/camera_refinement.h"
+#include "pipeline/training/network_start.h"
 
 namespace cvd {
 
@@ -40,7 +41,7 @@ TrainingStage run_training_stage(const RunOptions& o, DepthNet& net,
                                  const FlowStage& flow, const std::vector<cv::Mat>& usable,
                                  const std::string& poses_source, ComputePrecision precision,
                                  std::vector<NamedCamera>& cams, cv::Size depth_size,
-                                 const std::filesystem::path& cache) {
+                                 double depth_unit, const std::filesystem::path& cache) {
   TrainingStage st;
   // The pairs with the final cameras, made per batch (on the prefetch thread) from the flows the
   // flow stage holds (half precision by default) or reads from the cache when streamed.
@@ -51,7 +52,10 @@ TrainingStage run_training_stage(const RunOptions& o, DepthNet& net,
   if (o.steps > 0 && o.epochs > 0) to.steps_per_epoch = (o.steps + o.epochs - 1) / o.epochs;
   to.batch_pairs = o.batch_pairs;
   to.lr = o.lr > 0 ? o.lr : arch.default_lr;
-  to.lambda_disparity = o.lambda_disparity >= 0 ? o.lambda_disparity : arch.default_lambda;
+  to.loss.lambda_disparity = o.lambda_disparity >= 0 ? o.lambda_disparity
+                             : o.model.empty()       ? kUntrainedNetworkLambda
+                                                     : arch.default_lambda;
+  to.loss.depth_unit = depth_unit;
   to.seed = o.seed;
   to.checkpoint_dir = cache / "training";
   to.resume_key = json{{"model", o.model.string()},
@@ -59,7 +63,8 @@ TrainingStage run_training_stage(const RunOptions& o, DepthNet& net,
                        {"width", o.width},
                        {"depth_size", {depth_size.width, depth_size.height}},
                        {"lr", to.lr},
-                       {"lambda", to.lambda_disparity},
+                       {"lambda", to.loss.lambda_disparity},
+                       {"depth_unit", to.loss.depth_unit},
                        {"batch_pairs", to.batch_pairs},
                        {"steps_per_epoch", to.steps_per_epoch},
                        {"seed", to.seed},
@@ -94,16 +99,16 @@ TrainingStage run_training_stage(const RunOptions& o, DepthNet& net,
     return std::chrono::duration<double>(Clock::now() - t).count();
   };
   auto t = Clock::now();
-  st.initial_loss = evaluate_geometric_loss(net, load_frame, pairs, to.lambda_disparity, nullptr,
-                                            kLossEvaluationPairs);
+  st.initial_loss =
+      evaluate_geometric_loss(net, load_frame, pairs, to.loss, nullptr, kLossEvaluationPairs);
   st.loss_evaluation_s = seconds(t);
   st.result = train_test_time(net, load_frame, pairs, to);
   if (o.stop_after_epochs >= 0 && static_cast<int>(st.result.epoch_losses.size()) < o.epochs)
     fail(ErrorCategory::cancelled, "stopped after epoch {} (test hook)",
          st.result.epoch_losses.size());
   t = Clock::now();
-  st.final_loss = evaluate_geometric_loss(net, load_frame, pairs, to.lambda_disparity,
-                                          refinement.get(), kLossEvaluationPairs);
+  st.final_loss = evaluate_geometric_loss(net, load_frame, pairs, to.loss, refinement.get(),
+                                          kLossEvaluationPairs);
   st.loss_evaluation_s += seconds(t);
   st.loss_pairs = std::min(pairs.size(), kLossEvaluationPairs);
   if (refinement) {
@@ -129,7 +134,8 @@ TrainingStage run_training_stage(const RunOptions& o, DepthNet& net,
           ? to.steps_per_epoch
           : static_cast<int>((st.num_pairs + size_t(to.batch_pairs) - 1) / size_t(to.batch_pairs));
   st.lr = to.lr;
-  st.lambda = to.lambda_disparity;
+  st.lambda = to.loss.lambda_disparity;
+  st.depth_unit = to.loss.depth_unit;
   return st;
 }
 

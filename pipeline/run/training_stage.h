@@ -28,6 +28,7 @@ struct TrainingStage {
   bool step_budget = false;
   int batch_pairs = 0;
   double lr = 0, lambda = 0;
+  double depth_unit = 1;  // of the loss's disparity term (GeometricLossOptions::depth_unit)
   size_t num_pairs = 0;
   bool streamed = false;  // pairs read from cache/flow per batch
   // The geometric loss before and after training, on `loss_pairs` pairs (every pair up to
@@ -39,12 +40,13 @@ struct TrainingStage {
 };
 
 // `cams` at the depth resolution (refined in place); `usable` the user masks (empty: none);
-// `poses_source` and `precision` enter the resume key, so a changed setting restarts training.
+// `depth_unit` the loss's (InitialDepthStage::depth_unit); it, `poses_source` and `precision`
+// enter the resume key, so a changed setting restarts training.
 TrainingStage run_training_stage(const RunOptions& o, DepthNet& net,
                                  const std::function<Tensor(int)>& load_frame,
                                  const FlowStage& flow, const std::vector<cv::Mat>& usable,
                                  const std::string& poses_source, ComputePrecision precision,
                                  std::vector<NamedCamera>& cams, cv::Size depth_size,
-                                 const std::filesystem::path& cache);
+                                 double depth_unit, const std::filesystem::path& cache);
 
 }  // namespace cvd

@@ -1,5 +1,7 @@
 #include "pipeline/training/geometric_loss.h"
 
+#include <cmath>
+
 #include "engine/autograd.h"
 #include "engine/ops.h"
 
@@ -75,8 +77,11 @@ GeometricLoss geometric_loss_direction(const Tensor& depth_i, const Tensor& dept
   DType dt = depth_i.dtype();
   Tensor flow = d.flow.to(dt), mask = d.mask.to(dt).reshape({H * W});
 
+  CVD_CHECK(o.depth_unit > 0 && std::isfinite(o.depth_unit),
+            "geometric loss: depth unit {} must be positive", o.depth_unit);
+  const double floor = o.min_depth * o.depth_unit;
   Projection p = project(depth_i, d, cameras);
-  Tensor z = maximum(p.z, Tensor::full({}, o.min_depth, dt));
+  Tensor z = maximum(p.z, Tensor::full({}, floor, dt));
   Tensor xn = div(p.u, z), yn = div(p.v, z);
   if (cameras && cameras->focal_scale.defined()) {
     xn = mul(xn, cameras->focal_scale);
@@ -106,9 +111,9 @@ GeometricLoss geometric_loss_direction(const Tensor& depth_i, const Tensor& dept
   Tensor dj =
       grid_sample(depth_j.reshape({1, 1, H, W}), grid, GridSampleParams{GridPadding::border, true})
           .reshape({H * W});
-  Tensor zj = maximum(dj, Tensor::full({}, o.min_depth, dt));
+  Tensor zj = maximum(dj, Tensor::full({}, floor, dt));
   double focal = 0.5 * (d.K_i.fx + d.K_i.fy);
-  Tensor disp = mul_scalar(abs(sub(reciprocal(z), reciprocal(zj))), focal);
+  Tensor disp = mul_scalar(abs(sub(reciprocal(z), reciprocal(zj))), focal * o.depth_unit);
 
   Tensor count = maximum(sum(mask), Tensor::full({}, 1.0, dt));
   GeometricLoss r;

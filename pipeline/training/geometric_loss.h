@@ -7,7 +7,8 @@
 //   p_ij = pi(K_j c_ij)                                (its projection in frame j)
 //   f_ij = x + F_ij(x)                                 (where the flow says it went)
 //   L_spatial(x)   = || p_ij - f_ij ||_2               (not squared)
-//   L_disparity(x) = u_i | 1 / z_ij - 1 / D_j(f_ij) |  (D_j sampled bilinearly; u_i = focal)
+//   L_disparity(x) = u_i d | 1 / z_ij - 1 / D_j(f_ij) | (D_j sampled bilinearly; u_i = focal;
+//                                                       d = the depth unit, see below)
 // L_dir = masked mean of L_spatial + lambda * masked mean of L_disparity, and the pair loss is
 // the mean of both directions (i->j and j->i), as the reference implementation does.
 #pragma once
@@ -38,12 +39,19 @@ struct PairCameras {
 
 struct GeometricLossOptions {
   double lambda_disparity = 0.1;  // lambda: Mannequin 0.1, MiDaS 1e-4 (docs/design.md 5.7)
-  double min_depth = 1e-3;        // z below this is clamped before inversion
+  // The depth the disparity term and the depth floor are measured in. The spatial term is in
+  // pixels whatever the poses' units; 1 / z is not, so without a unit the balance of the two
+  // terms, and so the training, would change with the unit of the poses (millimetres against
+  // metres: a factor 1000 on lambda). 1 where the poses were calibrated to a pretrained
+  // network's depth units (the paper's lambdas are in those); the median sparse depth where the
+  // network's depth takes the poses' units (the default network, affine disparity).
+  double depth_unit = 1.0;
+  double min_depth = 1e-3;  // z below min_depth * depth_unit is clamped before inversion
 };
 
 struct GeometricLoss {
   Tensor spatial;    // scalar: masked mean of the reprojection distance (pixels)
-  Tensor disparity;  // scalar: masked mean of focal-weighted disparity difference
+  Tensor disparity;  // scalar: masked mean of focal-weighted disparity difference, x depth_unit
   Tensor total;      // spatial + lambda * disparity
 };
 

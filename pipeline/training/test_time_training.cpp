@@ -190,9 +190,9 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
 }
 
 double evaluate_geometric_loss(DepthNet& net, const std::function<Tensor(int)>& load_frame,
-                               const std::vector<TrainingPair>& pairs, double lambda_disparity,
-                               const CameraRefinement* cameras) {
-  return evaluate_geometric_loss(net, load_frame, PairsInMemory(pairs), lambda_disparity, cameras);
+                               const std::vector<TrainingPair>& pairs,
+                               const GeometricLossOptions& loss, const CameraRefinement* cameras) {
+  return evaluate_geometric_loss(net, load_frame, PairsInMemory(pairs), loss, cameras);
 }
 
 TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& load_frame,
@@ -227,8 +227,7 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
     spdlog::info("training: resuming from the checkpoint after epoch {} in {}", ck.epoch,
                  o.checkpoint_dir.string());
   }
-  GeometricLossOptions lo;
-  lo.lambda_disparity = o.lambda_disparity;
+  const GeometricLossOptions& lo = o.loss;
   const NanLossFault nan_fault = nan_loss_fault_from_env();
   net.train(true);
   ProcessGroup& pg = process_group();
@@ -345,13 +344,11 @@ std::vector<size_t> loss_evaluation_pairs(size_t num_pairs, size_t max_pairs) {
 }
 
 double evaluate_geometric_loss(DepthNet& net, const std::function<Tensor(int)>& load_frame,
-                               const PairSource& pairs, double lambda_disparity,
+                               const PairSource& pairs, const GeometricLossOptions& lo,
                                const CameraRefinement* cameras, size_t max_pairs) {
   NoGradGuard ng;
   bool was_training = net.is_training();
   net.eval();
-  GeometricLossOptions lo;
-  lo.lambda_disparity = lambda_disparity;
   std::map<int, Tensor> cache;
   double sum = 0;
   const std::vector<size_t> chosen = loss_evaluation_pairs(pairs.size(), max_pairs);

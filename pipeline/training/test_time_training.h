@@ -24,7 +24,7 @@ struct TrainingOptions {
   // a long clip's thousands of pairs need not all be seen per epoch (a step budget).
   int steps_per_epoch = 0;
   double lr = 4e-4;
-  double lambda_disparity = 0.1;
+  GeometricLossOptions loss;  // lambda and the depth unit
   uint64_t seed = 1;
   // Where checkpoints go (empty: none). A rerun with the same directory resumes.
   std::filesystem::path checkpoint_dir;
@@ -68,13 +68,14 @@ TrainingResult train_test_time(DepthNet& net, const std::function<Tensor(int)>& 
 // pair order (the same ones on every call; each of their frames' depth computed once). With
 // `cameras`, the loss of the refined cameras.
 double evaluate_geometric_loss(DepthNet& net, const std::function<Tensor(int)>& load_frame,
-                               const PairSource& pairs, double lambda_disparity,
+                               const PairSource& pairs, const GeometricLossOptions& loss,
                                const CameraRefinement* cameras = nullptr, size_t max_pairs = 0);
 
 // The pairs evaluate_geometric_loss uses: all of `num_pairs`, or `max_pairs` evenly spaced.
 std::vector<size_t> loss_evaluation_pairs(size_t num_pairs, size_t max_pairs);
 double evaluate_geometric_loss(DepthNet& net, const std::function<Tensor(int)>& load_frame,
-                               const std::vector<TrainingPair>& pairs, double lambda_disparity,
+                               const std::vector<TrainingPair>& pairs,
+                               const GeometricLossOptions& loss,
                                const CameraRefinement* cameras = nullptr);
 
 }  // namespace cvd

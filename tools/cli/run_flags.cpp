@@ -9,6 +9,7 @@
 #include "engine/process_group.h"
 #include "models/depth_net_architectures.h"
 #include "pipeline/run/quality_preset.h"
+#include "pipeline/training/network_start.h"
 #include "tools/cli/command.h"
 
 namespace cvd::cli {
@@ -125,7 +126,10 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s, bool grou
   }
   c->add_option("--lr", o.lr, "Learning rate; <= 0: per architecture (" + lr_defaults + ")");
   c->add_option("--lambda", o.lambda_disparity,
-                "Weight of the disparity term; < 0: per architecture (" + lambda_defaults + ")");
+                fmt::format("Weight of the disparity term; < 0: {:g} for the untrained default "
+                            "network (in units of the median sparse depth), per architecture for "
+                            "--model weights ({})",
+                            cvd::kUntrainedNetworkLambda, lambda_defaults));
   c->add_option("--seed", o.seed, "Random seed");
   s.warmup = c->add_option("--warmup", o.warmup_steps,
                            "Sparse-depth warm-up steps of the default network");

@@ -17,27 +17,38 @@ namespace {
 
 namespace fs = std::filesystem;
 
-TEST(PipelineEndToEnd, TrainingLowersFlowReprojectionLossAndDepthErrorOnTheSyntheticScene) {
-  test::TempDir dir;
+// The generated scene, `frames` frames of 256x160, written to dir/scene; its ground truth.
+SceneGroundTruth write_scene(const fs::path& dir, int frames) {
   SyntheticSceneOptions so;
-  so.frames = 8;
+  so.frames = frames;
   so.width = 256;
   so.height = 160;
   write_synthetic_scene(render_synthetic_scene(so), dir / "scene");
-  SceneGroundTruth gt = read_scene_ground_truth(dir / "scene");
+  return read_scene_ground_truth(dir / "scene");
+}
 
+// A run of dir/scene/rgb with given poses and the scene's intrinsics, no videos or point cloud.
+RunOptions scene_run(const fs::path& dir, const SceneGroundTruth& gt, const fs::path& poses,
+                     const fs::path& out) {
   RunOptions o;
   o.input = dir / "scene" / "rgb";
-  o.out = dir / "run";
-  o.poses_file = dir / "scene" / "poses.txt";
+  o.out = out;
+  o.poses_file = poses;
   o.poses_format = "tum";
   o.intrinsics = gt.intrinsics;
-  o.depth_long_side = 128;
   o.width = 0.125;
-  o.epochs = 3;
-  o.warmup_steps = 40;
   o.write_videos = false;
   o.write_point_cloud = false;
+  return o;
+}
+
+TEST(PipelineEndToEnd, TrainingLowersFlowReprojectionLossAndDepthErrorOnTheSyntheticScene) {
+  test::TempDir dir;
+  SceneGroundTruth gt = write_scene(dir.path(), 8);
+  RunOptions o = scene_run(dir.path(), gt, dir / "scene" / "poses.txt", dir / "run");
+  o.depth_long_side = 128;
+  o.epochs = 3;
+  o.warmup_steps = 40;
   RunResult r = run_pipeline(o);
   ASSERT_EQ(r.frame_names.size(), 8u);
   ASSERT_GT(r.num_pairs, 8);
@@ -82,31 +93,18 @@ TEST(PipelineEndToEnd, TrainingLowersFlowReprojectionLossAndDepthErrorOnTheSynth
 // in the two units; the flat start gives the lower layers no gradient until the head has one.
 TEST(PipelineEndToEnd, GivenPosesInMillimetresGiveTheSameDepthInMillimetres) {
   test::TempDir dir;
-  SyntheticSceneOptions so;
-  so.frames = 6;
-  so.width = 256;
-  so.height = 160;
-  write_synthetic_scene(render_synthetic_scene(so), dir / "scene");
-  SceneGroundTruth gt = read_scene_ground_truth(dir / "scene");
+  SceneGroundTruth gt = write_scene(dir.path(), 6);
   const double k = 1000.0;
   std::vector<TimedPose> poses = read_tum_trajectory(dir / "scene" / "poses.txt");
   for (TimedPose& p : poses) p.pose.t *= k;
   write_tum_trajectory(dir / "poses_mm.txt", poses);
 
   auto run = [&](const fs::path& poses_file, const char* out) {
-    RunOptions o;
-    o.input = dir / "scene" / "rgb";
-    o.out = dir / out;
-    o.poses_file = poses_file;
-    o.poses_format = "tum";
-    o.intrinsics = gt.intrinsics;
+    RunOptions o = scene_run(dir.path(), gt, poses_file, dir / out);
     o.depth_long_side = 96;
-    o.width = 0.125;
     o.epochs = 2;
     o.warmup_steps = 0;
     o.lambda_disparity = 0.1;  // a disparity term ten times the default's: a unit error shows
-    o.write_videos = false;
-    o.write_point_cloud = false;
     return run_pipeline(o);
   };
   RunResult m = run(dir / "scene" / "poses.txt", "metres");

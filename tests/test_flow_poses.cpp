@@ -16,7 +16,6 @@
 #include "engine/error.h"
 #include "pipeline/eval/eval_pose_metrics.h"
 #include "pipeline/io/trajectory_io.h"
-#include "pipeline/poses/camera_rotation_offset.h"
 #include "pipeline/poses/flow_camera_init.h"
 #include "pipeline/poses/flow_poses.h"
 #include "pipeline/poses/track_bundle_adjustment.h"
@@ -42,7 +41,7 @@ struct SyntheticTracks {
 };
 
 SyntheticTracks synthetic_tracks(int frames, int num_points, double noise_px, double outliers,
-                                 uint32_t seed = 3, double baseline = 1.0) {
+                                 uint32_t seed = 3) {
   std::mt19937 rng(seed);
   std::normal_distribution<double> noise(0.0, noise_px);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
@@ -58,7 +57,7 @@ SyntheticTracks synthetic_tracks(int frames, int num_points, double noise_px, do
     c.R.push_back((Eigen::AngleAxisd(0.04 * std::sin(a), Eigen::Vector3d::UnitX()) *
                    Eigen::AngleAxisd(0.08 * a, Eigen::Vector3d::UnitY()))
                       .toRotationMatrix());
-    c.c.push_back(baseline * Eigen::Vector3d(0.05 * k, 0.01 * std::sin(2 * a), 0.01 * k));
+    c.c.push_back(Eigen::Vector3d(0.05 * k, 0.01 * std::sin(2 * a), 0.01 * k));
   }
   for (int i = 0; i < num_points; ++i)
     s.points.push_back(Eigen::Vector3d(3 * u(rng), 1.5 * u(rng), 4.5 + 1.5 * u(rng)));
@@ -174,61 +173,6 @@ TEST(TrackBundleAdjustment, RecoversCamerasAndFocalFromNoisyTracksWithOutliers) 
     EXPECT_LT(rotation_angle_deg(est.R[0], s.truth.R[0]), 1e-9);
     EXPECT_LT((est.c[0] - s.truth.c[0]).norm(), 1e-9);
   }
-}
-
-// --given-poses offset: given cameras that are the true ones turned by one rotation (a nominal
-// extrinsic between the poses' sensor and the camera) get it back from noisy tracks with 5% gross
-// outliers; exact cameras end at the same place. The path is nearly straight, so a turn about the
-// motion direction barely changes what the cameras see; the part across it, which turns the
-// motion as each camera sees it, is what the tracks fix. With a tenth of the baseline (0.08 m over
-// 16 frames at 3-6 m, ~1 degree of parallax) every part is weaker but most of the 2 degrees is
-// still found. Measured (error of the offset, degrees): baseline x1 0.115 (0.015 across the
-// motion), x0.1 0.16.
-TEST(CameraRotationOffset, RecoversOneRotationBetweenGivenPosesAndTheCamera) {
-  const Eigen::Matrix3d offset =
-      Eigen::AngleAxisd(2.0 * M_PI / 180.0, Eigen::Vector3d(0.3, -1.0, 0.4).normalized())
-          .toRotationMatrix();
-  for (const double baseline : {1.0, 0.1}) {
-    for (const bool turned : {true, false}) {
-      SCOPED_TRACE(fmt::format("baseline x{}, given cameras turned: {}", baseline, turned));
-      SyntheticTracks s = synthetic_tracks(16, 600, 0.3, 0.05, 3, baseline);
-      std::vector<bool> usable(16, true);
-      TrackCameras given = s.truth;
-      if (turned)
-        for (auto& R : given.R) R = R * offset.transpose();
-      TrackCameras est = given;
-      std::vector<Eigen::Vector3d> X;
-      TrackBundleOptions o;
-      o.threads = 2;
-      const RotationOffsetReport r = adjust_rotation_offset(s.tracks, usable, X, est, o);
-      ASSERT_TRUE(r.adjustment.usable);
-      ASSERT_EQ(X.size(), s.tracks.size());
-      EXPECT_LT(r.adjustment.final_cost, r.adjustment.initial_cost);
-      EXPECT_GT(r.adjustment.outliers, 0);
-      EXPECT_LT(r.adjustment.rms_px, 0.5);
-      const Eigen::AngleAxisd error(r.offset.transpose() *
-                                    (turned ? offset : Eigen::Matrix3d::Identity()));
-      const Eigen::Vector3d e = error.axis() * error.angle() * 180.0 / M_PI;
-      const Eigen::Vector3d motion =
-          (s.truth.R[0].transpose() * (s.truth.c.back() - s.truth.c[0])).normalized();
-      EXPECT_LT(e.norm(), baseline == 1.0 ? 0.2 : 0.3);
-      if (baseline == 1.0) {
-        EXPECT_LT((e - e.dot(motion) * motion).norm(), 0.05);
-      }
-      EXPECT_NEAR(r.angle_deg, turned ? 2.0 : 0.0, 0.3);
-      for (size_t k = 0; k < est.R.size(); ++k) {
-        EXPECT_LT(rotation_angle_deg(est.R[k], given.R[k] * r.offset), 1e-9) << "frame " << k;
-        EXPECT_EQ(est.c[k], given.c[k]) << "frame " << k;  // centres kept
-      }
-    }
-  }
-}
-
-TEST(CameraRotationOffset, MismatchedSizesAreAnError) {
-  SyntheticTracks s = synthetic_tracks(4, 20, 0.0, 0.0);
-  std::vector<Eigen::Vector3d> X;
-  std::vector<bool> usable(3, true);
-  EXPECT_THROW(adjust_rotation_offset(s.tracks, usable, X, s.truth), cvd::Error);
 }
 
 TEST(TrackBundleAdjustment, MismatchedSizesAreAnError) {
@@ -417,46 +361,4 @@ TEST(FlowPoses, AdjustedStartRecoversPerturbedCamerasInTheirUnits) {
   EXPECT_LT(rpe.rot_mean_deg, 0.1);
   EXPECT_GT(r.points, 100);
   EXPECT_EQ(static_cast<int>(r.model.points.size()), r.points);
-}
-
-// --given-poses offset through estimate_flow_poses: the generated clip's true cameras, every one
-// turned by the same 2 degrees, give back that rotation from the frames' flow (measured: within
-// 0.14 deg, nearly all of it across the motion), and the turned cameras fit the tracks better
-// (truncated mean square error 0.060 -> 0.033 px^2); the result keeps the given centres and
-// units.
-TEST(FlowPoses, OffsetStartFindsTheRotationBetweenGivenPosesAndTheFrames) {
-  test::TempDir dir;
-  const SceneGroundTruth gt = generated_clip(dir.path(), 16);
-  const auto& [names, gt_poses, path] = frames_of(gt);
-  const Eigen::Matrix3d offset =
-      Eigen::AngleAxisd(2.0 * M_PI / 180.0, Eigen::Vector3d(-0.5, 1.0, 0.2).normalized())
-          .toRotationMatrix();
-  std::vector<NamedCamera> start;
-  for (size_t k = 0; k < names.size(); ++k) {
-    NamedCamera c;
-    c.name = names[k];
-    c.intrinsics = gt.intrinsics;
-    c.pose.R = gt_poses[k].R * offset.transpose();
-    c.pose.t = 3.0 * gt_poses[k].t;  // other units
-    c.registered = true;
-    start.push_back(c);
-  }
-  auto frame = [&](size_t k) { return cv::imread(gt.frames[k].rgb_path.string()); };
-  FlowPoseOptions o;
-  o.max_tracks = 4000;
-  o.start_rotation_offset_only = true;
-  const FlowPoseResult r = estimate_flow_poses(names, frame, nullptr, gt.intrinsics, o, &start);
-  EXPECT_EQ(r.rotation_start, "given poses");
-  const Eigen::AngleAxisd error(r.rotation_offset.transpose() * offset);
-  const Eigen::Vector3d e = error.axis() * error.angle() * 180.0 / M_PI;
-  const Eigen::Vector3d motion =
-      (gt_poses[0].R.transpose() * (gt_poses.back().t - gt_poses[0].t)).normalized();
-  EXPECT_LT(e.norm(), 0.3);
-  EXPECT_GT(r.start_score_px2, 1.5 * r.score_px2)
-      << "start " << r.start_score_px2 << " px^2, turned " << r.score_px2 << " px^2";
-  for (size_t k = 0; k < names.size(); ++k) {
-    if (!r.cameras[k].registered) continue;
-    EXPECT_LT((r.cameras[k].pose.t - start[k].pose.t).norm(), 1e-9) << "frame " << k;
-    EXPECT_LT(rotation_angle_deg(r.cameras[k].pose.R, start[k].pose.R * r.rotation_offset), 1e-6);
-  }
 }

@@ -66,10 +66,9 @@ struct PipelineOptions {
   /// --sparse-points (with poses_file): "flow" (flow tracks), "colmap" (COLMAP's
   /// point_triangulator on the given poses) or "auto" (colmap when it is on PATH)
   std::string sparse_points = "flow";
-  /// --given-poses (with poses_file): "fixed", "offset" (every pose turned by one rotation
-  /// between the poses' sensor and the camera, fitted to flow tracks of the frames) or
-  /// "adjusted" (the flow bundle adjustment starts from them: cameras and sparse points fitted to
-  /// flow tracks of the frames; focal and units kept)
+  /// --given-poses (with poses_file): "fixed", or "adjusted" (the flow bundle adjustment starts
+  /// from them: cameras and sparse points fitted to flow tracks of the frames; focal and units
+  /// kept)
   std::string given_poses = "fixed";
 
   // Flow

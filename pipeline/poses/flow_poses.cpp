@@ -14,7 +14,6 @@
 #include "engine/error.h"
 #include "pipeline/geometry/median.h"
 #include "pipeline/geometry/ray_parallax.h"
-#include "pipeline/poses/camera_rotation_offset.h"
 #include "pipeline/poses/flow_camera_init.h"
 #include "pipeline/poses/track_bundle_adjustment.h"
 
@@ -358,22 +357,7 @@ FlowPoseResult estimate_flow_poses(const std::vector<std::string>& names,
     from.cams = base;
     best = continue_from(tracks, usable, from);
     res.start_score_px2 = truncated_score(tracks, usable, best.cams, best.points, o.outlier_px);
-    if (o.start_rotation_offset_only) {
-      TrackBundleOptions bo;
-      bo.huber_px = o.huber_px;
-      bo.outlier_px = o.outlier_px;
-      bo.max_iterations = 50;
-      bo.threads = 1;  // reruns identical (see adjust())
-      const RotationOffsetReport r =
-          adjust_rotation_offset(tracks, usable, best.points, best.cams, bo);
-      best.report = r.adjustment;
-      best.ok = r.adjustment.usable && r.adjustment.residuals > 0;
-      best.score = best.ok ? truncated_score(tracks, usable, best.cams, best.points, o.outlier_px)
-                           : std::numeric_limits<double>::infinity();
-      res.rotation_offset = r.offset;
-    } else {
-      adjust(best, tracks, usable, false, o, 50);
-    }
+    adjust(best, tracks, usable, false, o, 50);
     if (!best.ok) fail(ErrorCategory::external, "flow poses: the bundle adjustment failed");
     res.focal_method = "given";
     res.rotation_start = "given poses";

@@ -42,9 +42,6 @@ struct FlowPoseOptions {
   int min_point_views = 3;
   int min_frame_observations = 20;  // a frame with fewer inlier observations is unregistered
   int threads = 0;                  // 0: every hardware thread
-  // With start cameras: adjust every camera (false), or only one rotation shared by every frame
-  // between the given poses and the camera (true; pipeline/poses/camera_rotation_offset.h).
-  bool start_rotation_offset_only = false;
 };
 
 struct FlowPoseCandidate {
@@ -71,9 +68,6 @@ struct FlowPoseResult {
   // with the start cameras and points intersected from them (start cameras only), and at the end.
   double start_score_px2 = 0, score_px2 = 0;
   double median_parallax_deg = 0;  // of the tracks' widest ray angle
-  // start_rotation_offset_only: the rotation found (camera frame; every start camera's rotation
-  // R becomes R * rotation_offset); identity otherwise.
-  Eigen::Matrix3d rotation_offset = Eigen::Matrix3d::Identity();
   double flow_seconds = 0, adjustment_seconds = 0, seconds = 0;
 };
 
@@ -95,8 +89,7 @@ FlowPoseTracks track_frames(const std::vector<std::string>& names,
 // when the flow gives no usable tracks at all.
 // start: cameras to start from instead of the candidates (given poses, camera-to-world, one per
 // frame; unregistered ones stay unregistered); needs K, keeps the start's units and adjusts the
-// cameras and points on the tracks with the focal fixed (or only one rotation offset, see
-// FlowPoseOptions::start_rotation_offset_only).
+// cameras and points on the tracks with the focal fixed.
 FlowPoseResult estimate_flow_poses(const std::vector<std::string>& names,
                                    const std::function<cv::Mat(size_t)>& frame,
                                    const std::function<cv::Mat(size_t)>& mask,

@@ -7,8 +7,6 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include <Eigen/Geometry>
-
 #include "pipeline/eval/eval_pose_metrics.h"
 #include "pipeline/io/atomic_file.h"
 #include "pipeline/io/trajectory_io.h"
@@ -49,13 +47,10 @@ json camera_change(const std::vector<NamedCamera>& from, const std::vector<Named
 void run_flow_poses(const RunOptions& o, const FramesStage& f, const std::optional<Intrinsics>& K,
                     const fs::path& cache, PosesStage& st, json& intrinsics_info,
                     const std::vector<NamedCamera>* start) {
-  const bool offset_only = start && o.given_poses == "offset";
   const fs::path dir = cache / (start ? "flow_poses_given" : "flow_poses"),
                  model_dir = dir / "result_model";
-  FlowPoseOptions fo;
-  fo.start_rotation_offset_only = offset_only;
+  const FlowPoseOptions fo;
   json key = {{"masks", o.masks.string()},
-              {"start_adjustment", start ? json(o.given_poses) : json()},
               {"start_cameras_crc32", start ? json(cameras_crc32(*start)) : json()},
               {"intrinsics", K ? json{K->fx, K->fy, K->cx, K->cy, K->width, K->height} : json()},
               {"long_side", fo.long_side},
@@ -115,17 +110,7 @@ void run_flow_poses(const RunOptions& o, const FramesStage& f, const std::option
             {"flow_seconds", r.flow_seconds},
             {"adjustment_seconds", r.adjustment_seconds},
             {"seconds", r.seconds}};
-    if (offset_only) {
-      const Eigen::AngleAxisd aa(r.rotation_offset);
-      const Eigen::Vector3d v = aa.axis() * aa.angle() * 180.0 / M_PI;
-      info["rotation_offset_deg"] = aa.angle() * 180.0 / M_PI;
-      info["rotation_offset_vector_deg"] = {v.x(), v.y(), v.z()};
-      spdlog::info(
-          "poses: one rotation between the given poses and the camera, estimated on flow tracks: "
-          "{:.3f} deg (truncated mean square error {:.3g} -> {:.3g} px^2)",
-          info["rotation_offset_deg"].get<double>(), r.start_score_px2, r.score_px2);
-      info["start_score_px2"] = r.start_score_px2;
-    } else if (start) {
+    if (start) {
       info["start_score_px2"] = r.start_score_px2;
       info["camera_change"] = camera_change(*start, r.cameras);
       spdlog::info(
@@ -138,22 +123,6 @@ void run_flow_poses(const RunOptions& o, const FramesStage& f, const std::option
     write_colmap_text_model(model_dir, model);
     write_text_file(dir / "info.json", info.dump(1));
     write_text_file(dir / "cache_key.json", key.dump(1));
-  }
-  if (offset_only) {
-    // Every given camera turned by the offset (frames the tracks missed too); the sparse points
-    // come from flow tracks on these cameras, as for fixed poses.
-    const std::vector<double> v = info.at("rotation_offset_vector_deg").get<std::vector<double>>();
-    const Eigen::Vector3d w = Eigen::Vector3d(v[0], v[1], v[2]) * M_PI / 180.0;
-    const Eigen::Matrix3d offset =
-        w.norm() > 0 ? Eigen::AngleAxisd(w.norm(), w.normalized()).toRotationMatrix()
-                     : Eigen::Matrix3d::Identity();
-    st.cameras = *start;
-    for (auto& c : st.cameras)
-      if (c.registered) c.pose.R = c.pose.R * offset;
-    for (auto& p : st.points) p.clear();
-    st.source += ", turned by one rotation fitted to flow tracks";
-    st.info["flow_poses"] = info;
-    return;
   }
   std::optional<Intrinsics> Kused = K;
   for (size_t k = 0; k < f.names.size(); ++k) {

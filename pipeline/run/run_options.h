@@ -55,9 +55,7 @@ struct RunOptions {
   // point_triangulator on the given poses; required) or "auto" (colmap when it is on PATH, else
   // flow tracks).
   std::string sparse_points = "flow";
-  // Given poses as they are ("fixed"), turned by one rotation fitted to flow tracks ("offset":
-  // the extrinsic between the poses' sensor and the camera; pipeline/poses/camera_rotation_offset.h),
-  // or as the start of the flow bundle adjustment ("adjusted":
+  // Given poses as they are ("fixed") or as the start of the flow bundle adjustment ("adjusted":
   // cameras and points adjusted on flow tracks of the frames, focal and units kept;
   // pipeline/poses/flow_poses.h), for poses from another sensor that need not agree with the
   // frames exactly.

@@ -100,8 +100,8 @@ RunResult run_pipeline(const RunOptions& o) {
   // checks), an unknown precision or bf16 without CPU support are errors.
   CVD_CHECK(o.refine_poses == "none" || o.refine_poses == "rotation" || o.refine_poses == "full",
             "refine_poses must be none, rotation or full, got '{}'", o.refine_poses);
-  CVD_CHECK(o.given_poses == "fixed" || o.given_poses == "offset" || o.given_poses == "adjusted",
-            "given_poses must be fixed, offset or adjusted, got '{}'", o.given_poses);
+  CVD_CHECK(o.given_poses == "fixed" || o.given_poses == "adjusted",
+            "given_poses must be fixed or adjusted, got '{}'", o.given_poses);
   CVD_CHECK(o.warmup_scale == "auto" || o.warmup_scale == "frame" || o.warmup_scale == "video",
             "warmup_scale must be auto, frame or video, got '{}'", o.warmup_scale);
   CVD_CHECK(o.poses_source == "auto" || o.poses_source == "colmap" || o.poses_source == "flow",

@@ -307,11 +307,7 @@ PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::
            o.poses_file.string());
     st.cameras = cameras_from_file(o, f, *K);
     st.source = o.poses_format + " file " + o.poses_file.string();
-    if (o.given_poses == "offset") {
-      const std::vector<NamedCamera> given = st.cameras;
-      run_flow_poses(o, f, K, cache, st, intrinsics_info, &given);
-      add_known_pose_points(o, f, *K, cache, st);
-    } else if (o.given_poses == "adjusted") {
+    if (o.given_poses == "adjusted") {
       if (o.sparse_points != "flow")
         spdlog::warn(
             "poses: --sparse-points {} is not used with --given-poses adjusted (the points come "

@@ -87,11 +87,9 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s, bool grou
                 "PATH (auto)")
       ->check(CLI::IsMember({"auto", "colmap", "flow"}));
   c->add_option("--given-poses", o.given_poses,
-                "With --poses: use them as they are (fixed), turn them all by one rotation "
-                "between the poses' sensor and the camera fitted to flow tracks of the frames "
-                "(offset), or adjust every camera and the sparse points to those tracks, focal "
-                "and units kept (adjusted)")
-      ->check(CLI::IsMember({"fixed", "offset", "adjusted"}));
+                "With --poses: use them as they are (fixed), or adjust them and their sparse "
+                "points to flow tracks of the frames, focal and units kept (adjusted)")
+      ->check(CLI::IsMember({"fixed", "adjusted"}));
   c->add_option("--pairs", o.pair_storage,
                 "Training pairs: all in memory, streamed from OUT/cache/flow per batch (memory "
                 "independent of the number of pairs; prefetched), or auto (stream above 1 GiB)")

@@ -5,6 +5,9 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "engine/module_weights.h"
+#include "engine/random.h"
+#include "models/depth_net.h"
 #include "pipeline/eval/eval_depth_metrics.h"
 #include "pipeline/io/pfm_io.h"
 #include "pipeline/io/trajectory_io.h"
@@ -25,6 +28,17 @@ SceneGroundTruth write_scene(const fs::path& dir, int frames) {
   so.height = 160;
   write_synthetic_scene(render_synthetic_scene(so), dir / "scene");
   return read_scene_ground_truth(dir / "scene");
+}
+
+float median_of(std::vector<float> v) {
+  std::nth_element(v.begin(), v.begin() + static_cast<long>(v.size() / 2), v.end());
+  return v[v.size() / 2];
+}
+
+double median_depth(const std::vector<cv::Mat>& depths) {
+  std::vector<float> v;
+  for (const cv::Mat& d : depths) v.insert(v.end(), d.begin<float>(), d.end<float>());
+  return median_of(v);
 }
 
 // A run of dir/scene/rgb with given poses and the scene's intrinsics, no videos or point cloud.
@@ -133,6 +147,94 @@ TEST(PipelineEndToEnd, GivenPosesInMillimetresGiveTheSameDepthInMillimetres) {
   // a geometric loss before training of 1.43 against 1.77.
   EXPECT_LT(mean, 4e-4);
   EXPECT_LT(worst, 2e-3);
+}
+
+// The first six frames of a 400-frame pass of the generated scene's path, without shake: they
+// span about a fifth of a degree of parallax, under the flow triangulation's degree, so given
+// poses give no sparse point. Written to dir/scene with the poses in kilometres
+// (dir/poses_km.txt); returns the scene's median depth in kilometres.
+double write_tiny_baseline_scene(const fs::path& dir, SceneGroundTruth& gt) {
+  SyntheticSceneOptions so;
+  so.frames = 400;
+  so.width = 160;
+  so.height = 96;
+  so.supersampling = 1;
+  so.shake_translation_m = 0;
+  so.shake_rotation_deg = 0;
+  so.moving_object = false;
+  SyntheticScene scene = render_synthetic_scene(so);
+  scene.frames.resize(6);
+  write_synthetic_scene(scene, dir / "scene");
+  gt = read_scene_ground_truth(dir / "scene");
+  std::vector<TimedPose> poses = read_tum_trajectory(dir / "scene" / "poses.txt");
+  for (TimedPose& p : poses) p.pose.t *= 1e-3;
+  write_tum_trajectory(dir / "poses_km.txt", poses);
+  std::vector<float> z;
+  for (const auto& f : gt.frames) z.insert(z.end(), f.depth.begin<float>(), f.depth.end<float>());
+  return 1e-3 * median_of(z);
+}
+
+// Given poses in which no flow point triangulates (the scene above, in kilometres): the default
+// network starts as a flat plane at the flow's depth level in those units
+// (pipeline/geometry/flow_depth_level.h), not at depth 1 (some 200 times the scene's depth in
+// kilometres), and training runs from it.
+TEST(PipelineEndToEnd, PosesWithoutTriangulablePointsStartAtTheFlowsDepthLevel) {
+  test::TempDir dir;
+  SceneGroundTruth gt;
+  const double true_km = write_tiny_baseline_scene(dir.path(), gt);
+  RunOptions o = scene_run(dir.path(), gt, dir / "poses_km.txt", dir / "run");
+  o.depth_long_side = 96;
+  o.epochs = 1;
+  o.warmup_steps = 0;
+  const RunResult r = run_pipeline(o);
+  const nlohmann::json& calib = r.run_info.at("calibration");
+  ASSERT_EQ(calib.at("initial_depth_source"), "fallback") << r.run_info.dump(1);
+  const nlohmann::json& level =
+      r.run_info.at("sparse_points").at("triangulation").at("fallback_level");
+  const double level_km = calib.at("initial_depth_level");
+  RecordProperty("true_median_depth_km", std::to_string(true_km));
+  RecordProperty("level_km", std::to_string(level_km));
+  EXPECT_EQ(level.at("source"), "flow");
+  // Measured (2026-12-06): 0.00473 km against the scene's median depth 0.00499 km (-5%; the
+  // level weighs pixels by their parallax, the median counts them alike).
+  EXPECT_GT(level_km, true_km / 1.25);
+  EXPECT_LT(level_km, true_km * 1.25);
+  ASSERT_EQ(r.epoch_losses.size(), 1u);
+  EXPECT_TRUE(std::isfinite(r.final_loss));
+  const double depth = median_depth(r.depths);
+  EXPECT_GT(depth, level_km / 2);
+  EXPECT_LT(depth, level_km * 2);
+}
+
+// The same with converted weights (random ones, saved as `cvd convert` would): an inverse-depth
+// network's median initial depth is tied to that level by scaling the poses (one scale, no
+// sparse point to calibrate on), an affine-disparity one's by a scale-only affine, poses kept in
+// kilometres.
+TEST(PipelineEndToEnd, ConvertedNetworksWithoutSparsePointsAreTiedToTheFlowsDepthLevel) {
+  test::TempDir dir;
+  SceneGroundTruth gt;
+  write_tiny_baseline_scene(dir.path(), gt);
+  for (const std::string arch : {"mannequin", "depth_anything_v2"}) {
+    Generator gen(5);
+    const fs::path weights = dir / (arch + ".cvdw");
+    save_weights(*create_depth_net(arch, 1.0 / 16, gen), weights, arch, {{"width", 1.0 / 16}});
+    RunOptions o = scene_run(dir.path(), gt, dir / "poses_km.txt", dir / arch);
+    o.model = weights;
+    o.depth_long_side = 96;
+    o.epochs = 0;
+    const RunResult r = run_pipeline(o);
+    const nlohmann::json& calib = r.run_info.at("calibration");
+    ASSERT_TRUE(calib.contains("fallback_level")) << arch << ": " << calib.dump(1);
+    const double level_km = calib.at("fallback_level"), scale = calib.at("scale");
+    const bool affine = arch == "depth_anything_v2";
+    // Depth in the poses' units: the output poses are the given ones times the scale.
+    const double depth_km = median_depth(r.depths) / (affine ? 1.0 : scale);
+    // The stage takes the median on every 4th pixel of the initial maps, this on all of them.
+    EXPECT_NEAR(depth_km, level_km, 0.05 * level_km) << arch;
+    const double t_in = (gt.frames[5].pose.t - gt.frames[0].pose.t).norm() * 1e-3;
+    const double t_out = (r.cameras[5].pose.t - r.cameras[0].pose.t).norm();
+    EXPECT_NEAR(t_out, t_in * (affine ? 1.0 : scale), 1e-6 * t_out) << arch;
+  }
 }
 
 }  // namespace

@@ -1,5 +1,6 @@
 #include "pipeline/run/initial_depth_stage.h"
 
+#include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -82,8 +83,9 @@ json calibrate_disparity_affine(DepthNet& net, std::vector<cv::Mat>& initial,
 
 // The default network's start: the flat plane, then the warm-up on the sparse depths.
 json start_network(const RunOptions& o, DepthNet& net, const std::function<Tensor(int)>& load_frame,
-                   const std::vector<SparseDepth>& sparse, bool from_sfm) {
+                   const std::vector<SparseDepth>& sparse, bool from_sfm, double fallback_depth) {
   NetworkStartOptions so;
+  if (fallback_depth > 0) so.fallback_depth = fallback_depth;
   so.warmup_steps = o.warmup_steps;
   so.lr = o.lr > 0 ? o.lr : depth_net_architecture(net.arch()).default_lr;
   so.seed = o.seed;
@@ -116,6 +118,46 @@ json start_network(const RunOptions& o, DepthNet& net, const std::function<Tenso
   return calib;
 }
 
+// A converted network without a single sparse point (given poses the flow could not triangulate):
+// its depth is tied to the poses through the flow's depth level instead (SparsePointsStage::
+// fallback_depth): the median of the network's initial depth maps is set to that level, by
+// scaling the poses for inverse depth, by a scale-only disparity affine for affine disparity.
+json calibrate_to_fallback_level(DepthNet& net, std::vector<cv::Mat>& initial,
+                                 std::vector<NamedCamera>& cams, double level, bool affine) {
+  std::vector<double> z;
+  for (const cv::Mat& d : initial)
+    for (int y = 0; y < d.rows; y += 4)
+      for (int x = 0; x < d.cols; x += 4)
+        if (const float v = d.at<float>(y, x); v > 0 && v < 1e4f) z.push_back(v);
+  CVD_CHECK(!z.empty(), "initial depth: the network predicted no positive depth");
+  const double network_median = median(z);
+  const std::string w = fmt::format(
+      "no sparse 3-D points: the network's median initial depth is set to the flow's depth level "
+      "{:.4g} (units of the poses){}",
+      level, affine ? "" : " by scaling the poses");
+  spdlog::warn("{}", w);
+  json calib = {{"warnings", {w}}, {"fallback_level", level}};
+  if (affine) {
+    // depth = 1 / (scale * r) with r = 1 / network depth: scale = network median / level.
+    const double scale = network_median / level;
+    net.set_disparity_affine(scale, 0.0, 1e-3 / level);
+    for (cv::Mat& d : initial) d *= level / network_median;
+    calib["method"] =
+        "affine-invariant disparity without sparse points: scale only, to the "
+        "flow's depth level; poses keep their units";
+    calib["scale"] = scale;
+    calib["shift"] = 0.0;
+    return calib;
+  }
+  const double scale = network_median / level;  // network units per pose unit
+  for (NamedCamera& c : cams) c.pose.t *= scale;
+  calib["method"] =
+      "no sparse points: one scale, the network's median depth over the flow's "
+      "depth level, applied to the poses";
+  calib["scale"] = scale;
+  return calib;
+}
+
 }  // namespace
 
 InitialDepthStage run_initial_depth_stage(const RunOptions& o, DepthNet& net,
@@ -128,11 +170,19 @@ InitialDepthStage run_initial_depth_stage(const RunOptions& o, DepthNet& net,
   for (int k = 0; k < n; ++k)
     if (cams[k].registered) st.sparse[k] = project_points(cams[k], points.points[k]);
   if (o.model.empty()) {
-    st.calibration = start_network(o, net, load_frame, st.sparse, points.from_sfm);
+    st.calibration =
+        start_network(o, net, load_frame, st.sparse, points.from_sfm, points.fallback_depth);
     st.depth_unit = st.calibration.at("initial_depth_level").get<double>();
   }
   st.depths = infer_depths(net, load_frame, n, depth_size, o, "initial depth");
-  if (!o.model.empty() && depth_net_architecture(net.arch()).affine_disparity) {
+  size_t sparse_count = 0;
+  for (const SparseDepth& s : st.sparse) sparse_count += s.z.size();
+  if (!o.model.empty() && sparse_count == 0 && points.fallback_depth > 0) {
+    const bool affine = depth_net_architecture(net.arch()).affine_disparity;
+    st.calibration =
+        calibrate_to_fallback_level(net, st.depths, cams, points.fallback_depth, affine);
+    if (affine) st.depth_unit = points.fallback_depth;
+  } else if (!o.model.empty() && depth_net_architecture(net.arch()).affine_disparity) {
     st.calibration = calibrate_disparity_affine(net, st.depths, st.sparse);
     std::vector<double> z;
     for (const SparseDepth& s : st.sparse) z.insert(z.end(), s.z.begin(), s.z.end());

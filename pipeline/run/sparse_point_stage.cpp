@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include "pipeline/geometry/flow_depth_level.h"
 #include "pipeline/geometry/flow_tracks.h"
 #include "pipeline/geometry/flow_triangulation.h"
 #include "pipeline/run/flow_pair_source.h"
@@ -43,6 +44,18 @@ SparsePointsStage run_sparse_points_stage(const PosesStage& poses, const FlowSta
     }
     st.triangulation = {{"method", "flow pairs (no track could be triangulated)"}, {"kept", kept}};
     spdlog::warn("sparse points: no flow track could be triangulated; {} points from pairs", kept);
+    if (kept == 0) {
+      // Not one point: the flat start's level from every trusted flow pixel's inverse depth.
+      InverseDepthSamples samples;
+      for (size_t k = 0; k < flow.pairs.size(); ++k) {
+        const FlowPairData p = masked.flows(k);
+        add_inverse_depth_samples(cams[p.pair.first], cams[p.pair.second], p.forward,
+                                  p.forward_mask, samples);
+      }
+      const FlowDepthLevel level = flow_depth_level(samples, cams);
+      st.fallback_depth = level.depth;
+      st.triangulation["fallback_level"] = level.info();
+    }
   }
   return st;
 }

@@ -32,7 +32,8 @@ struct NetworkStartOptions {
   double lr = 4e-4;        // Adam, as test-time training
   uint64_t seed = 0;
   // Depth of the flat plane when there are no sparse points at all (given poses with a tiny
-  // baseline): in the units of the poses.
+  // baseline): in the units of the poses. The pipeline sets the level of the flow's pixels
+  // (pipeline/geometry/flow_depth_level.h).
   double fallback_depth = 1.0;
   // Fit each frame's sparse depths up to one scale factor per frame (for points triangulated
   // from flow, whose scale drifts from frame to frame); otherwise absolute log depth.

@@ -112,14 +112,8 @@ Attempt continue_from(const std::vector<PixelTrack>& tracks, const std::vector<b
 // elimination sums in a varying order; one thread per adjustment keeps reruns identical, and the
 // adjustments themselves run side by side).
 void adjust(Attempt& a, const std::vector<PixelTrack>& tracks, const std::vector<bool>& usable,
-            bool refine_focal, const FlowPoseOptions& o, int iterations,
-            const TrackCameras* prior = nullptr, double prior_centre = 0) {
+            bool refine_focal, const FlowPoseOptions& o, int iterations) {
   TrackBundleOptions bo;
-  if (prior) {
-    bo.prior = prior;
-    bo.prior_rotation_deg = o.prior_rotation_deg;
-    bo.prior_centre = prior_centre;
-  }
   bo.refine_focal = refine_focal;
   bo.huber_px = o.huber_px;
   bo.outlier_px = o.outlier_px;
@@ -363,11 +357,7 @@ FlowPoseResult estimate_flow_poses(const std::vector<std::string>& names,
     from.cams = base;
     best = continue_from(tracks, usable, from);
     res.start_score_px2 = truncated_score(tracks, usable, best.cams, best.points, o.outlier_px);
-    std::vector<double> steps;
-    for (size_t k = 1; k < n; ++k)
-      if (usable[k] && usable[k - 1]) steps.push_back((base.c[k] - base.c[k - 1]).norm());
-    const double prior_centre = o.prior_centre_steps * median(steps);
-    adjust(best, tracks, usable, false, o, 50, &base, prior_centre);
+    adjust(best, tracks, usable, false, o, 50);
     if (!best.ok) fail(ErrorCategory::external, "flow poses: the bundle adjustment failed");
     res.focal_method = "given";
     res.rotation_start = "given poses";

@@ -42,11 +42,6 @@ struct FlowPoseOptions {
   int min_point_views = 3;
   int min_frame_observations = 20;  // a frame with fewer inlier observations is unregistered
   int threads = 0;                  // 0: every hardware thread
-  // Start cameras only (given poses): a prior towards them in the adjustment
-  // (TrackBundleOptions::prior), one standard deviation of rotation in degrees and of the centre
-  // in median distances between consecutive start centres. 0: none.
-  double prior_rotation_deg = 0;
-  double prior_centre_steps = 0;
 };
 
 struct FlowPoseCandidate {

@@ -43,34 +43,6 @@ struct CentreDistance {
   }
 };
 
-// Pulls a camera towards its prior: the rotation between them (angle-axis of
-// R_wc * R_wc_prior^T, radians) over sigma_rotation and the centre offset over sigma_centre.
-// A sigma of 0 gives that part a zero residual.
-struct PosePrior {
-  Eigen::Matrix3d Rwc_prior_t;  // the prior's camera-to-world rotation (= R_wc_prior^T)
-  Eigen::Vector3d centre;
-  double inv_sigma_rotation, inv_sigma_centre;
-  template <typename T>
-  bool operator()(const T* cam, T* r) const {
-    T Rwc[9];
-    ceres::AngleAxisToRotationMatrix(cam, Rwc);  // column-major
-    T D[9];                                      // R_wc * R_wc_prior^T, column-major
-    for (int col = 0; col < 3; ++col)
-      for (int row = 0; row < 3; ++row) {
-        T sum = T(0);
-        for (int k = 0; k < 3; ++k) sum += Rwc[k * 3 + row] * T(Rwc_prior_t(k, col));
-        D[col * 3 + row] = sum;
-      }
-    T aa[3];
-    ceres::RotationMatrixToAngleAxis(D, aa);
-    for (int i = 0; i < 3; ++i) {
-      r[i] = T(inv_sigma_rotation) * aa[i];
-      r[3 + i] = T(inv_sigma_centre) * (cam[3 + i] - T(centre[i]));
-    }
-    return true;
-  }
-};
-
 double focal_for_fov(double fov_deg, int width) {
   return 0.5 * width / std::tan(0.5 * fov_deg * M_PI / 180.0);
 }
@@ -157,19 +129,6 @@ TrackBundleReport adjust_once(const std::vector<PixelTrack>& tracks,
     auto* cost = new ceres::AutoDiffCostFunction<CentreDistance, 1, 6>(new CentreDistance{
         cams.c[size_t(fixed)], far_d, std::sqrt(static_cast<double>(rep.residuals))});
     problem.AddResidualBlock(cost, nullptr, cam[size_t(far)].data());
-  }
-
-  if (o.prior && (o.prior_rotation_deg > 0 || o.prior_centre > 0)) {
-    CVD_CHECK(o.prior->R.size() == n && o.prior->c.size() == n,
-              "bundle_adjust_tracks: the prior has {} cameras for {}", o.prior->R.size(), n);
-    const double inv_rot = o.prior_rotation_deg > 0 ? 180.0 / (M_PI * o.prior_rotation_deg) : 0.0;
-    const double inv_centre = o.prior_centre > 0 ? 1.0 / o.prior_centre : 0.0;
-    for (size_t k = 0; k < n; ++k) {
-      if (!camera_used[k] || static_cast<int>(k) == fixed) continue;
-      auto* cost = new ceres::AutoDiffCostFunction<PosePrior, 6, 6>(
-          new PosePrior{o.prior->R[k], o.prior->c[k], inv_rot, inv_centre});
-      problem.AddResidualBlock(cost, nullptr, cam[k].data());
-    }
   }
 
   ceres::Solver::Options so;

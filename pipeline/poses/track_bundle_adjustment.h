@@ -30,12 +30,6 @@ struct TrackBundleOptions {
   double min_fov_deg = 20;  // focal bounds (horizontal field of view)
   double max_fov_deg = 120;
   int threads = 0;  // 0: every hardware thread
-  // A Gaussian prior towards `prior`'s cameras (given poses being adjusted), one standard
-  // deviation each: of the rotation (degrees, the angle of R_prior^T R) and of the centre (the
-  // poses' units). 0: that part has no prior. Reprojection residuals count as 1 px of noise.
-  const TrackCameras* prior = nullptr;
-  double prior_rotation_deg = 0;
-  double prior_centre = 0;
 };
 
 struct TrackBundleReport {

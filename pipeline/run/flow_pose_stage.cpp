@@ -49,11 +49,8 @@ void run_flow_poses(const RunOptions& o, const FramesStage& f, const std::option
                     const std::vector<NamedCamera>* start) {
   const fs::path dir = cache / (start ? "flow_poses_given" : "flow_poses"),
                  model_dir = dir / "result_model";
-  FlowPoseOptions fo;
-  if (const char* e = std::getenv("CVD_EXP_PRIOR"); e && start)
-    std::sscanf(e, "%lf,%lf", &fo.prior_rotation_deg, &fo.prior_centre_steps);
+  const FlowPoseOptions fo;
   json key = {{"masks", o.masks.string()},
-              {"prior", {fo.prior_rotation_deg, fo.prior_centre_steps}},
               {"start_cameras_crc32", start ? json(cameras_crc32(*start)) : json()},
               {"intrinsics", K ? json{K->fx, K->fy, K->cx, K->cy, K->width, K->height} : json()},
               {"long_side", fo.long_side},

@@ -65,6 +65,11 @@ const std::vector<ConvShape>& shapes() {
       {"dw5x5_576_16x20_s1", 8, 576, 16, 20, 576, 5, params(1, 2, 2, 576)},
       {"dw5x5_576_16x20_s2", 8, 576, 16, 20, 576, 5, params(2, 1, 2, 576)},
       {"1x1_96-576_16x20", 8, 96, 16, 20, 576, 1, params(1, 0, 0)},
+      // The default (width 1/8) Mannequin's narrow full-resolution layers, at `cvd run`'s 256 px
+      // and 4 pairs a step; 2 -> 8 is the forward problem 8 -> 2's backward data equals (weights
+      // flipped and transposed).
+      {"11x11_8-2_192x256", 4, 8, 192, 256, 2, 11, params(1, 5, 5)},
+      {"11x11_2-8_192x256", 4, 2, 192, 256, 8, 11, params(1, 5, 5)},
   };
   return s;
 }

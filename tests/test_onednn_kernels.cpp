@@ -185,6 +185,15 @@ const std::vector<ConvCase>& conv_cases() {
       {"1x1 single image", 1, 7, 3, 5, 9, 1, 1, conv_params(1, 0, 0, 0, 0), true},
       {"1x1 stride 2", 2, 8, 7, 6, 12, 1, 1, conv_params(2, 0, 0, 0, 0), true},
       {"11x11 s1 p5", 1, 16, 13, 12, 16, 11, 11, conv_params(1, 5, 5, 5, 5), true},
+      // Narrow outputs (< 16 channels): backward data as a forward convolution with flipped,
+      // transposed weights where eligible (unit stride, no dilation, pads <= k - 1).
+      {"narrow 8->2 11x11 p5", 2, 8, 13, 14, 2, 11, 11, conv_params(1, 5, 5, 5, 5), true},
+      {"narrow 4->4 7x5 asym pads", 2, 4, 9, 11, 4, 7, 5, conv_params(1, 3, 1, 0, 4), false},
+      {"narrow 24->3 3x3", 3, 24, 6, 7, 3, 3, 3, conv_params(1, 1, 1, 1, 1), true},
+      {"narrow 3x3 pad 3 (not eligible)", 1, 8, 5, 6, 4, 3, 3, conv_params(1, 3, 3, 3, 3), false},
+      {"narrow s2 (not eligible)", 2, 3, 11, 10, 8, 3, 3, conv_params(2, 1, 1, 1, 1), true},
+      {"narrow dilation 2 (not eligible)", 1, 4, 9, 9, 2, 3, 3, conv_params(1, 2, 2, 2, 2, 2),
+       false},
   };
   return cases;
 }
@@ -263,6 +272,23 @@ TEST(OnednnConv, MatchesReferenceWithBlockedDepthwiseKernel) {
 TEST(OnednnConv, MatchesReferenceWithDirectDepthwiseKernel) {
   DepthwiseKernelOverride k(cpu::DepthwiseKernel::direct_avx512);
   for (const ConvCase& cc : conv_cases()) check_conv_case(cc);
+}
+
+// Backward data as a forward convolution (onednn_conv_family.h): on every eligible case, wide
+// outputs included, and on none (the default takes it for outputs under 16 channels only).
+struct BackwardDataAsForwardOverride {
+  explicit BackwardDataAsForwardOverride(int mode) {
+    onednn::set_backward_data_as_forward_override(mode);
+  }
+  ~BackwardDataAsForwardOverride() { onednn::set_backward_data_as_forward_override(-1); }
+};
+
+TEST(OnednnConv, MatchesReferenceWithBackwardDataAsForwardEverywhereOrNowhere) {
+  for (int mode : {1, 0}) {
+    SCOPED_TRACE(mode ? "everywhere eligible" : "nowhere");
+    BackwardDataAsForwardOverride o(mode);
+    for (const ConvCase& cc : conv_cases()) check_conv_case(cc);
+  }
 }
 
 TEST(OnednnConv, MatchesReferenceBatchSplitIntoChunks) {

@@ -52,6 +52,22 @@ cpu::DepthwiseGeometry depthwise_geometry(const Shape& x, const Shape& w, const 
   return g;
 }
 
+// w [O, C, KH, KW] -> [C, O, KH, KW], each filter turned by 180 degrees.
+Tensor flipped_transposed_weights(const Tensor& w) {
+  const Shape& s = w.shape();
+  const int64_t O = s[0], C = s[1], KH = s[2], KW = s[3];
+  Tensor f = Tensor::empty({C, O, KH, KW});
+  const float* src = w.data<float>();
+  float* dst = f.data<float>();
+  for (int64_t o = 0; o < O; ++o)
+    for (int64_t c = 0; c < C; ++c)
+      for (int64_t y = 0; y < KH; ++y)
+        for (int64_t x = 0; x < KW; ++x)
+          dst[((c * O + o) * KH + (KH - 1 - y)) * KW + (KW - 1 - x)] =
+              src[((o * C + c) * KH + y) * KW + x];
+  return f;
+}
+
 void zero_fill(const Tensor& t) {
   if (t.defined() && t.numel() > 0) std::memset(t.data_ptr(), 0, t.nbytes());
 }
@@ -100,6 +116,18 @@ void conv2d_backward_data(const KernelArgs& a) {
   }
   if (use_pointwise_matmul(pr)) {
     pointwise_conv_backward_data(gy, w, gx);
+    return;
+  }
+  if (use_backward_data_as_forward(pr)) {
+    const Tensor wf = flipped_transposed_weights(w);
+    Conv2dParams fp = a.p<Conv2dParams>();
+    const int kh = static_cast<int>(w.shape()[2]), kw = static_cast<int>(w.shape()[3]);
+    fp.pad_top = kh - 1 - fp.pad_top;
+    fp.pad_bottom = kh - 1 - fp.pad_bottom;
+    fp.pad_left = kw - 1 - fp.pad_left;
+    fp.pad_right = kw - 1 - fp.pad_right;
+    const ConvProblem fpr = conv_problem(gy.shape(), wf.shape(), gx.shape(), fp, false);
+    conv_pass_plan<ConvolutionFamily>(fpr, ConvPass::forward).execute({gy, wf, gx});
     return;
   }
   conv_pass_plan<ConvolutionFamily>(pr, ConvPass::backward_data).execute({gy, w, gx});

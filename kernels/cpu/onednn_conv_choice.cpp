@@ -13,6 +13,7 @@ std::atomic<int> g_layout_override{-1};
 std::atomic<size_t> g_chunk_budget_override{0};
 std::atomic<int> g_depthwise_override{-1};
 std::atomic<int> g_pointwise_override{-1};
+std::atomic<int> g_backward_data_as_forward_override{-1};
 
 // Reordered activation bytes (input and output side) of one chunk above which the batch is split:
 // the chunk's blocked copies should still be in the shared cache when the primitive and the
@@ -32,6 +33,7 @@ void set_conv_layout_override(int layout) { g_layout_override = layout; }
 void set_conv_chunk_budget_override(size_t bytes) { g_chunk_budget_override = bytes; }
 void set_depthwise_kernel_override(int mode) { g_depthwise_override = mode; }
 void set_pointwise_matmul_override(int mode) { g_pointwise_override = mode; }
+void set_backward_data_as_forward_override(int mode) { g_backward_data_as_forward_override = mode; }
 
 void choose_conv_precision(ConvProblem& p) {
   const int64_t g = std::max<int64_t>(p.groups, 1);
@@ -52,6 +54,18 @@ bool use_pointwise_matmul(const ConvProblem& p) {
   if (!pointwise || p.bf16) return false;
   const int forced = g_pointwise_override.load();
   return forced < 0 ? true : forced == 1;
+}
+
+bool use_backward_data_as_forward(const ConvProblem& p) {
+  if (p.groups != 1 || p.weights.size() != 4 || p.strides != dnnl::memory::dims{1, 1} ||
+      p.dilates != dnnl::memory::dims{0, 0})
+    return false;
+  for (int i = 0; i < 2; ++i)
+    if (p.pad_l[size_t(i)] > p.weights[size_t(2 + i)] - 1 ||
+        p.pad_r[size_t(i)] > p.weights[size_t(2 + i)] - 1)
+      return false;
+  const int forced = g_backward_data_as_forward_override.load();
+  return forced < 0 ? p.dst[1] < 16 : forced == 1;
 }
 
 bool use_depthwise_kernel(const ConvProblem& p, ConvPass /*pass*/) {

@@ -62,13 +62,23 @@ void pointwise_conv_backward_data(const Tensor& gy, const Tensor& w, const Tenso
 void pointwise_conv_backward_weight(const Tensor& gy, const Tensor& x, const Tensor& gw,
                                     const Tensor& gb);
 
+// Backward data of a unit-stride, undilated, ungrouped convolution whose output has fewer than 16
+// channels, computed as the forward convolution of the output gradient with the weights flipped
+// and transposed ([C, O, KH, KW], pads KH-1-pad per side). oneDNN 2.6 runs such narrow backward
+// data passes far below its forward speed (8 -> 2 channels, 11x11, 192x256, Intel Xeon: 11.6
+// GFLOP/s against 118 for the equivalent forward 2 -> 8; bench/bench_conv.cpp); the default
+// network's full-resolution layers are this narrow.
+bool use_backward_data_as_forward(const ConvProblem& p);
+
 // Tuning overrides for tests and benchmarks: a forced layout (-1: automatic), the byte budget of
 // the reordered activations of one chunk (0: automatic), and the depthwise kernel choice
-// (-1: automatic, 0: never, 1: always), and the pointwise matmul choice (same values).
+// (-1: automatic, 0: never, 1: always), the pointwise matmul choice and the backward-data-as-
+// forward choice (same values; 1 applies it to every eligible problem, narrow or not).
 void set_conv_layout_override(int layout);
 void set_conv_chunk_budget_override(size_t bytes);
 void set_depthwise_kernel_override(int mode);
 void set_pointwise_matmul_override(int mode);
+void set_backward_data_as_forward_override(int mode);
 
 // Sum of gy [N, C, H, W] over N, H and W into gb [C] (f64 accumulation). bf16 backward-weights
 // passes compute the bias gradient with this instead of the primitive: oneDNN 2.6's AMX kernel

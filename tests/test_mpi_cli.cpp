@@ -1,7 +1,10 @@
 // `mpirun -np 2 cvd run` (issue 21) on a tiny generated clip (`cvd scene`, 8 frames of 128x96
 // with its TUM poses and intrinsics), against one process:
-//  * two ranks give the same depth as one (max per-pixel relative difference <= 2e-3: the
-//    synchronised batch norm and the split sums round differently over two epochs of f32), the
+//  * two ranks give the same depth as one (max per-pixel relative difference <= 5e-3: the
+//    synchronised batch norm and the split sums round differently over two epochs of f32, and
+//    training amplifies rounding; measured 1.6e-3, and 3.4e-3 since narrow convolutions compute
+//    backward data as a forward convolution, whose rounding depends on the batch and threads a
+//    rank has; two single-process seeds differ by ~1.6%, test_precision), the
 //    same number of pairs, and run.json records the two processes and the bytes all-reduced;
 //  * a rank killed during the second epoch ends the job with a non-zero exit and no depth
 //    output, and a rerun as ONE process resumes from the first epoch's checkpoint to the
@@ -86,7 +89,7 @@ TEST_F(MpiRun, TwoRanksGiveTheDepthOfOneProcess) {
   int files = 0;
   const double diff = max_relative_depth_difference(out, single(), files);
   EXPECT_EQ(files, 8);
-  EXPECT_LE(diff, 2e-3);
+  EXPECT_LE(diff, 5e-3);
   json a = read_json(out / "run.json"), b = read_json(single() / "run.json");
   EXPECT_EQ(a["processes"]["count"], 2);
   EXPECT_EQ(b["processes"]["count"], 1);
@@ -114,7 +117,7 @@ TEST_F(MpiRun, AKilledRankEndsTheJobAndOneProcessResumes) {
   json info = read_json(out / "run.json");
   EXPECT_EQ(info["training"]["resumed_from_epoch"], 1);
   int files = 0;
-  EXPECT_LE(max_relative_depth_difference(out, single(), files), 2e-3);
+  EXPECT_LE(max_relative_depth_difference(out, single(), files), 5e-3);
   EXPECT_EQ(files, 8);
 }
 

@@ -5,6 +5,8 @@
 #include "engine/compute_precision.h"
 #include "kernels/cpu/onednn_conv_family.h"
 
+#include <cstdlib>
+
 namespace cvd::onednn {
 
 namespace {
@@ -64,7 +66,13 @@ bool use_backward_data_as_forward(const ConvProblem& p) {
     if (p.pad_l[size_t(i)] > p.weights[size_t(2 + i)] - 1 ||
         p.pad_r[size_t(i)] > p.weights[size_t(2 + i)] - 1)
       return false;
-  const int forced = g_backward_data_as_forward_override.load();
+  // CVD_CONV_BWD_DATA_AS_FORWARD=0 turns the path off, =1 takes it on every eligible problem.
+  static const int from_env = [] {
+    const char* e = std::getenv("CVD_CONV_BWD_DATA_AS_FORWARD");
+    return e && (e[0] == '0' || e[0] == '1') ? e[0] - '0' : -1;
+  }();
+  int forced = g_backward_data_as_forward_override.load();
+  if (forced < 0) forced = from_env;
   return forced < 0 ? p.dst[1] < 16 : forced == 1;
 }
 

@@ -36,22 +36,20 @@ SparsePointsStage run_sparse_points_stage(const PosesStage& poses, const FlowSta
   spdlog::info("sparse points: {} of {} flow tracks triangulated (tracks of up to {} frames)",
                ts.kept, ts.tracks, ts.max_length);
   if (ts.kept == 0) {
+    // Pair by pair; each trusted pixel's inverse depth is gathered in the same pass (flows are
+    // streamed from the cache), for the flat start's level should not one point be kept.
     int kept = 0;
+    InverseDepthSamples samples;
     for (size_t k = 0; k < flow.pairs.size(); ++k) {
       const FlowPairData p = masked.flows(k);
-      kept += triangulate_flow_points(cams[p.pair.first], cams[p.pair.second], p.pair.first,
-                                      p.pair.second, p.forward, p.forward_mask, st.points);
+      const NamedCamera &ci = cams[p.pair.first], &cj = cams[p.pair.second];
+      kept += triangulate_flow_points(ci, cj, p.pair.first, p.pair.second, p.forward,
+                                      p.forward_mask, st.points);
+      add_inverse_depth_samples(ci, cj, p.forward, p.forward_mask, samples);
     }
     st.triangulation = {{"method", "flow pairs (no track could be triangulated)"}, {"kept", kept}};
     spdlog::warn("sparse points: no flow track could be triangulated; {} points from pairs", kept);
     if (kept == 0) {
-      // Not one point: the flat start's level from every trusted flow pixel's inverse depth.
-      InverseDepthSamples samples;
-      for (size_t k = 0; k < flow.pairs.size(); ++k) {
-        const FlowPairData p = masked.flows(k);
-        add_inverse_depth_samples(cams[p.pair.first], cams[p.pair.second], p.forward,
-                                  p.forward_mask, samples);
-      }
       const FlowDepthLevel level = flow_depth_level(samples, cams);
       st.fallback_depth = level.depth;
       st.triangulation["fallback_level"] = level.info();

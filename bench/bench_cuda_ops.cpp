@@ -74,7 +74,7 @@ std::vector<Case> cases() {
                [](const std::vector<Tensor>& t) {
                  Tensor rm = Tensor::zeros({64}, DType::f32, t[0].device());
                  Tensor rv = Tensor::ones({64}, DType::f32, t[0].device());
-                 return batch_norm(t[0], rm, rv, t[1], t[2], BatchNormParams{true, 0.1, 1e-5});
+                 return batch_norm(t[0], rm, rv, t[1], t[2], BatchNormParams{});
                }});
   c.push_back(
       {"upsample_bilinear_x2_8x64x48x64", {{8, 64, 48, 64}}, [](const std::vector<Tensor>& t) {

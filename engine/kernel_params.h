@@ -54,6 +54,11 @@ struct BatchNormParams {
   bool training = true;
   double momentum = 0.1;
   double eps = 1e-5;
+  // An activation fused after the affine (relu or clip only; engine/ops.h batch_norm_act).
+  // batch_norm then writes act(y); batch_norm_backward takes beta? as a sixth input, recomputes
+  // the pre-activation y from x and the statistics, and passes gy only where act passes it.
+  bool fused_act = false;
+  UnaryParams act;
 };
 
 struct Pool2dParams {

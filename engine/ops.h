@@ -89,8 +89,9 @@ Tensor conv_transpose2d(const Tensor& x, const Tensor& w, const Tensor& b,
 Tensor batch_norm(const Tensor& x, const Tensor& running_mean, const Tensor& running_var,
                   const Tensor& gamma, const Tensor& beta, const BatchNormParams& p);
 // act(batch_norm(x)) for act = relu or clip (relu6), one recorded op that keeps x but not its
-// output: backward recomputes the pre-activation, and convolutions that read the output
-// recompute it too instead of keeping it (engine/rematerialize.h).
+// output, and one kernel call each way (BatchNormParams::fused_act): the forward writes act(y),
+// the backward masks gy at the pre-activation it recomputes from x. Convolutions that read the
+// output recompute it instead of keeping it (engine/rematerialize.h).
 Tensor batch_norm_act(const Tensor& x, const Tensor& running_mean, const Tensor& running_var,
                       const Tensor& gamma, const Tensor& beta, const BatchNormParams& p,
                       const UnaryParams& act);

@@ -164,14 +164,14 @@ std::vector<Tensor> batch_norm_grads(const Tensor& g, const Tensor& xs, const Te
   return {gx, gg, gb};
 }
 
-// (x - mean) * invstd * gamma + beta with given statistics (the eval-mode kernel, to which the
-// statistics are passed as running mean and var = 1 / invstd^2 - eps).
+// act((x - mean) * invstd * gamma + beta) with given statistics and the eps and fused activation
+// of `fused` (the eval-mode kernel, to which the statistics are passed as running mean and
+// var = 1 / invstd^2 - eps).
 Tensor batch_norm_apply(const Tensor& xs, const Tensor& gs, const Tensor& bs, const Tensor& mean,
-                        const Tensor& var, double eps) {
-  BatchNormParams p;
+                        const Tensor& var, const BatchNormParams& fused) {
+  BatchNormParams p = fused;
   p.training = false;
   p.momentum = 0.0;
-  p.eps = eps;
   Tensor y = empty_like_kind(xs.shape(), xs);
   Tensor m = empty_like_kind(mean.shape(), mean), s = empty_like_kind(mean.shape(), mean);
   dispatch(OpId::batch_norm, xs, KernelArgs{{xs, gs, bs, mean, var}, {y, m, s}, &p});
@@ -195,14 +195,17 @@ Tensor batch_norm(const Tensor& x_in, const Tensor& running_mean, const Tensor& 
 }
 
 Tensor batch_norm_act(const Tensor& x_in, const Tensor& running_mean, const Tensor& running_var,
-                      const Tensor& gamma_in, const Tensor& beta_in, const BatchNormParams& p,
+                      const Tensor& gamma_in, const Tensor& beta_in, const BatchNormParams& p_in,
                       const UnaryParams& act) {
   CVD_CHECK(act.op == UnaryOp::relu || act.op == UnaryOp::clip,
             "batch_norm_act: the activation must be relu or clip (relu6)");
+  // One kernel call each way: the forward writes act(y), the backward masks gy itself.
+  BatchNormParams p = p_in;
+  p.fused_act = true;
+  p.act = act;
   BatchNormForward f =
       batch_norm_forward("batch_norm_act", x_in, running_mean, running_var, gamma_in, beta_in, p);
   Tensor z = f.y;
-  dispatch(OpId::unary, z, KernelArgs{{z}, {z}, &act});  // in place
   if (!any_requires_grad({f.x, f.gamma, f.beta})) return z;
   // Keeps x (as batch_norm does), not z: backward recomputes the pre-activation from x for the
   // activation's mask, so z lives only as long as its consumers keep it.
@@ -214,21 +217,20 @@ Tensor batch_norm_act(const Tensor& x_in, const Tensor& running_mean, const Tens
   const Tensor xs = f.x.detach(), gs = f.gamma.defined() ? f.gamma.detach() : Tensor(),
                bs = f.beta.defined() ? f.beta.detach() : Tensor();
   record("batch_norm_act", z, {f.x, f.gamma, f.beta},
-         [xs, gs, bs, mean = f.mean, invstd = f.invstd, var, p, act](
-             const Tensor& g_in, const std::vector<bool>& need) {
+         [xs, gs, bs, mean = f.mean, invstd = f.invstd, p](const Tensor& g_in,
+                                                           const std::vector<bool>& need) {
+           const int64_t c = xs.size(1);
            Tensor g = g_in.contiguous();
-           Tensor pre = batch_norm_apply(xs, gs, bs, mean, var, p.eps);
-           // relu and clip read only where the pre-activation lies (engine/elementwise_math.h).
-           Tensor gy = empty_like_kind(g.shape(), g);
-           dispatch(OpId::unary_backward, g, KernelArgs{{g, pre, pre}, {gy}, &act});
-           pre = Tensor();
-           return batch_norm_grads(gy, xs, gs, bs.defined(), mean, invstd, p, need);
+           Tensor gx = need[0] ? empty_like_kind(xs.shape(), xs) : Tensor();
+           Tensor gg = gs.defined() && need[1] ? empty_like_kind({c}, xs) : Tensor();
+           Tensor gb = bs.defined() && need[2] ? empty_like_kind({c}, xs) : Tensor();
+           dispatch(OpId::batch_norm_backward, g,
+                    KernelArgs{{g, xs, gs, mean, invstd, bs}, {gx, gg, gb}, &p});
+           return std::vector<Tensor>{gx, gg, gb};
          });
   // Its consumers (convolutions) may recompute z instead of keeping it.
-  mark_rematerializable(z, [xs, gs, bs, mean = f.mean, var, eps = p.eps, act] {
-    Tensor y = batch_norm_apply(xs, gs, bs, mean, var, eps);
-    dispatch(OpId::unary, y, KernelArgs{{y}, {y}, &act});
-    return y;
+  mark_rematerializable(z, [xs, gs, bs, mean = f.mean, var, p] {
+    return batch_norm_apply(xs, gs, bs, mean, var, p);
   });
   return z;
 }

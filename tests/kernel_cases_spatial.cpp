@@ -9,6 +9,7 @@
 //   3e-5: bicubic resize (the CUDA body computes its source coordinates and cubic weights in f32,
 //         as PyTorch's CUDA kernel does; on a 2.6x downscale their rounding reaches 1.1e-5).
 #include <cmath>
+#include <optional>
 #include <string>
 #include <utility>
 
@@ -181,33 +182,43 @@ Calls batch_norm_calls() {
   Generator gen(8);
   Calls calls;
   const Shape c{4};
+  // No activation, then relu and clip fused (BatchNormParams::fused_act; x spread so that clip
+  // cuts on both sides).
+  std::vector<std::optional<UnaryParams>> acts = {std::nullopt, UnaryParams{UnaryOp::relu},
+                                                  UnaryParams{UnaryOp::clip, -0.5, 1.0}};
   // Three values per channel (two would make every input gradient 0), and 2 * 3 * 40 * 50 = 12000
   // per channel: several chunks.
   for (const Shape& s : {Shape{3, 4, 5, 6}, Shape{3, 4, 1, 1}, Shape{2, 4, 3, 40, 50}}) {
-    for (bool training : {true, false}) {
-      for (bool affine : {true, false}) {
-        BatchNormParams bn;
-        bn.training = training;
-        const auto p = params_of(bn);
-        const std::string what =
-            shape_text(s) + (training ? " train" : " eval") + (affine ? " affine" : "");
-        const Pair x = normal(s, gen, 2.0);
-        const Pair gamma = affine ? uniform(c, gen, 0.5, 1.5) : Pair{};
-        const Pair beta = affine ? normal(c, gen) : Pair{};
-        const std::vector<Pair> in = {x, gamma, beta, normal(c, gen), uniform(c, gen, 0.5, 2.0)};
-        // Reads the running statistics after the call too (updated in training).
-        KernelCall fwd{"batch_norm " + what, OpId::batch_norm, in, {s, c, c}, p, 1e-5};
-        fwd.read_inputs = true;
-        calls.push_back(fwd);
-        const auto ref = reference_outputs(OpId::batch_norm, in, {s, c, c}, p.get());
-        const Pair mean = pair_of(ref.at(1), c), invstd = pair_of(ref.at(2), c);
-        calls.push_back(
-            {"batch_norm backward " + what,
-             OpId::batch_norm_backward,
-             {normal(s, gen), x, gamma, mean, invstd},
-             affine ? std::vector<Shape>{s, c, c} : std::vector<Shape>{s, kUndefined, kUndefined},
-             p,
-             1e-5});
+    for (const auto& act : acts) {
+      for (bool training : {true, false}) {
+        for (bool affine : {true, false}) {
+          BatchNormParams bn;
+          bn.training = training;
+          bn.fused_act = act.has_value();
+          if (act) bn.act = *act;
+          const auto p = params_of(bn);
+          const std::string what = shape_text(s) + (training ? " train" : " eval") +
+                                   (affine ? " affine" : "") +
+                                   (!act                       ? ""
+                                    : act->op == UnaryOp::relu ? " relu"
+                                                               : " clip");
+          const Pair x = normal(s, gen, 2.0);
+          const Pair gamma = affine ? uniform(c, gen, 0.5, 1.5) : Pair{};
+          const Pair beta = affine ? normal(c, gen) : Pair{};
+          const std::vector<Pair> in = {x, gamma, beta, normal(c, gen), uniform(c, gen, 0.5, 2.0)};
+          // Reads the running statistics after the call too (updated in training).
+          KernelCall fwd{"batch_norm " + what, OpId::batch_norm, in, {s, c, c}, p, 1e-5};
+          fwd.read_inputs = true;
+          calls.push_back(fwd);
+          const auto ref = reference_outputs(OpId::batch_norm, in, {s, c, c}, p.get());
+          const Pair mean = pair_of(ref.at(1), c), invstd = pair_of(ref.at(2), c);
+          std::vector<Pair> bwd_in = {normal(s, gen), x, gamma, mean, invstd};
+          if (act) bwd_in.push_back(beta);
+          calls.push_back(
+              {"batch_norm backward " + what, OpId::batch_norm_backward, bwd_in,
+               affine ? std::vector<Shape>{s, c, c} : std::vector<Shape>{s, kUndefined, kUndefined},
+               p, 1e-5});
+        }
       }
     }
   }

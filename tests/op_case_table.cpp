@@ -69,7 +69,8 @@ OpCase bn_case(const std::string& name, bool training, bool affine) {
             // Fresh running statistics per call, so finite differences see the same state.
             Tensor rm = Tensor::full({4}, 0.1, t[0].dtype(), t[0].device());
             Tensor rv = Tensor::full({4}, 1.5, t[0].dtype(), t[0].device());
-            BatchNormParams p{training, 0.1, 1e-5};
+            BatchNormParams p;
+            p.training = training;
             return batch_norm(t[0], rm, rv, affine ? t[1] : Tensor(), affine ? t[2] : Tensor(), p);
           }};
 }
@@ -83,7 +84,8 @@ OpCase bn_act_case(const std::string& name, bool training, UnaryParams act, bool
           [training, act, then_conv](const In& t) {
             Tensor rm = Tensor::full({4}, 0.1, t[0].dtype(), t[0].device());
             Tensor rv = Tensor::full({4}, 1.5, t[0].dtype(), t[0].device());
-            BatchNormParams p{training, 0.1, 1e-5};
+            BatchNormParams p;
+            p.training = training;
             // x * 3: BN output spread over (-6, 6) and beyond, so relu6 clips on both sides.
             Tensor z = batch_norm_act(t[0], rm, rv, t[1] * 3.0, t[2], p, act);
             return then_conv ? conv2d(z, t[3], Tensor(), conv(1, 1, 1, 1, 1)) : z;

@@ -189,7 +189,10 @@ void parse_params(const std::string& kernel, const json& j, ParsedParams& p) {
     p.conv_t.output_padding_w = j.at("output_padding_w");
     p.ptr = &p.conv_t;
   } else if (kernel.rfind("batch_norm", 0) == 0) {
-    p.bn = {j.at("training"), j.at("momentum"), j.at("eps")};
+    p.bn = BatchNormParams{};
+    p.bn.training = j.at("training");
+    p.bn.momentum = j.at("momentum");
+    p.bn.eps = j.at("eps");
     p.ptr = &p.bn;
   } else if (kernel.rfind("max_pool2d", 0) == 0 || kernel.rfind("avg_pool2d", 0) == 0) {
     p.pool.kernel_h = j.at("kernel_h"), p.pool.kernel_w = j.at("kernel_w");

@@ -47,7 +47,7 @@ Conv2dParams same3x3() {
   return p;
 }
 
-const BatchNormParams kTrain{true, 0.1, 1e-5};
+const BatchNormParams kTrain{};  // training, momentum 0.1, eps 1e-5
 
 // Whether the activation between the batch norm and the convolution is still alive once the
 // caller drops its own handle (i.e. whether backward keeps it).

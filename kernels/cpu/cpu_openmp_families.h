@@ -19,5 +19,6 @@ void register_resize_kernels(KernelRegistry& r);       // cpu_resize.cpp
 void register_grid_sample_kernels(KernelRegistry& r);  // cpu_grid_sample.cpp
 void register_optimizer_kernels(KernelRegistry& r);    // cpu_optim.cpp
 void register_row_kernels(KernelRegistry& r);          // cpu_rows.cpp
+void register_batch_norm_kernels(KernelRegistry& r);   // cpu_batch_norm.cpp
 
 }  // namespace cvd::cpu

@@ -5,10 +5,9 @@
 
 namespace cvd::onednn {
 
-void register_conv_kernels(KernelRegistry& r);        // onednn_conv.cpp
-void register_deconv_kernels(KernelRegistry& r);      // onednn_deconv.cpp
-void register_batch_norm_kernels(KernelRegistry& r);  // onednn_batch_norm.cpp
-void register_pool_kernels(KernelRegistry& r);        // onednn_pool.cpp
-void register_matmul_kernels(KernelRegistry& r);      // onednn_matmul.cpp
+void register_conv_kernels(KernelRegistry& r);    // onednn_conv.cpp
+void register_deconv_kernels(KernelRegistry& r);  // onednn_deconv.cpp
+void register_pool_kernels(KernelRegistry& r);    // onednn_pool.cpp
+void register_matmul_kernels(KernelRegistry& r);  // onednn_matmul.cpp
 
 }  // namespace cvd::onednn

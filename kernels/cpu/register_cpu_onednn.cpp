@@ -7,7 +7,6 @@ namespace cvd {
 void register_cpu_onednn_kernels(KernelRegistry& r) {
   onednn::register_conv_kernels(r);
   onednn::register_deconv_kernels(r);
-  onednn::register_batch_norm_kernels(r);
   onednn::register_pool_kernels(r);
   onednn::register_matmul_kernels(r);
 }

@@ -13,6 +13,7 @@ void register_cpu_openmp_kernels(KernelRegistry& r) {
   cpu::register_grid_sample_kernels(r);
   cpu::register_optimizer_kernels(r);
   cpu::register_row_kernels(r);
+  cpu::register_batch_norm_kernels(r);
 }
 
 }  // namespace cvd

@@ -27,16 +27,47 @@ inline ChannelGeometry channel_geometry(const Tensor& x) {
   return {x.shape()[0], x.shape()[1], inner};
 }
 
+// gy taken back through a fused activation (BatchNormParams::fused_act): gy where act passes it
+// at the pre-activation (x - mean) * invstd * gamma + beta; gy itself when off.
+template <class T>
+struct ActGate {
+  const T *gamma, *beta, *mean, *invstd;  // gamma, beta may be nullptr
+  bool on;
+  UnaryOp op;
+  T a, b;
+  CVD_HOST_DEVICE T operator()(T gy, T x, int64_t c) const {
+    if (!on) return gy;
+    const T pre = (x - mean[c]) * invstd[c] * (gamma ? gamma[c] : T(1)) + (beta ? beta[c] : T(0));
+    return unary_backward(op, gy, pre, unary_forward(op, pre, a, b), a, b);
+  }
+};
+
+template <class T>
+ActGate<T> act_gate(const KernelArgs& a) {
+  const BatchNormParams& p = a.p<BatchNormParams>();
+  const bool on = p.fused_act;
+  return {data_or_null<T>(a.in[2]),
+          on ? data_or_null<T>(a.in[5]) : nullptr,
+          a.in[3].data<T>(),
+          a.in[4].data<T>(),
+          on,
+          p.act.op,
+          static_cast<T>(p.act.a),
+          static_cast<T>(p.act.b)};
+}
+
 // Per-channel sums in chunks, so that C * chunks threads share the work: thread t = (c, chunk)
 // writes partial[2 t] = sum a, partial[2 t + 1] = sum b over its elements of channel c, in double.
 // Forward (gy == nullptr): a = x - s, b = (x - s)^2 with s = the channel's first element (a shift
-// that keeps E[b] - E[a]^2 accurate); backward: a = gy, b = gy * (x - mean) * invstd.
+// that keeps E[b] - E[a]^2 accurate); backward: a = gy, b = gy * (x - mean) * invstd, gy through
+// the gate of a fused activation.
 template <class T>
 struct ChannelPartialSumsBody {
   const T *x, *gy, *mean, *invstd;
   double* partial;
   ChannelGeometry g;
   int64_t chunk, chunks;
+  ActGate<T> gate;
   CVD_HOST_DEVICE void operator()(int64_t t) const {
     const int64_t c = t / chunks, k = t % chunks;
     const int64_t count = g.n * g.inner;
@@ -46,8 +77,9 @@ struct ChannelPartialSumsBody {
     for (int64_t e = k * chunk; e < end; ++e) {
       const int64_t idx = g.index(e / g.inner, c, e % g.inner);
       if (gy) {
-        sa += gy[idx];
-        sb += static_cast<double>(gy[idx]) * (static_cast<double>(x[idx]) - mean[c]) * invstd[c];
+        const T gm = gate(gy[idx], x[idx], c);
+        sa += gm;
+        sb += static_cast<double>(gm) * (static_cast<double>(x[idx]) - mean[c]) * invstd[c];
       } else {
         const double d = static_cast<double>(x[idx]) - shift;
         sa += d;
@@ -101,11 +133,15 @@ struct BatchNormApplyBody {
   const T *x, *gamma, *beta, *mean, *invstd;  // gamma, beta may be nullptr
   T* y;
   ChannelGeometry g;
+  bool fused_act;
+  UnaryOp op;
+  T a, b;
   CVD_HOST_DEVICE void operator()(int64_t k) const {
     const int64_t c = (k / g.inner) % g.c;
     const T scale = gamma ? gamma[c] : T(1);
     const T shift = beta ? beta[c] : T(0);
-    y[k] = (x[k] - mean[c]) * invstd[c] * scale + shift;
+    const T pre = (x[k] - mean[c]) * invstd[c] * scale + shift;
+    y[k] = fused_act ? unary_forward(op, pre, a, b) : pre;
   }
 };
 
@@ -132,6 +168,7 @@ struct BatchNormBackwardDataBody {
   T *gx, *ggamma, *gbeta;  // ggamma / gbeta written by the thread of element 0 of each channel
   ChannelGeometry g;
   bool training;
+  ActGate<T> gate;
   CVD_HOST_DEVICE void operator()(int64_t k) const {
     const int64_t c = (k / g.inner) % g.c;
     const T sum_gy = sums[c], sum_gy_xhat = sums[g.c + c];
@@ -143,8 +180,9 @@ struct BatchNormBackwardDataBody {
     const T scale = gamma ? gamma[c] : T(1);
     const T m = static_cast<T>(g.n * g.inner);
     const T xhat = (x[k] - mean[c]) * invstd[c];
-    gx[k] = training ? scale * invstd[c] * (gy[k] - sum_gy / m - xhat * sum_gy_xhat / m)
-                     : scale * invstd[c] * gy[k];
+    const T gm = gate(gy[k], x[k], c);
+    gx[k] = training ? scale * invstd[c] * (gm - sum_gy / m - xhat * sum_gy_xhat / m)
+                     : scale * invstd[c] * gm;
   }
 };
 
@@ -319,7 +357,8 @@ void batch_norm_op(const KernelArgs& a) {
     partial = Tensor::empty({g.c * chunks * 2}, DType::f64, x.device());
     Launch::launch(g.c * chunks,
                    ChannelPartialSumsBody<float>{x.data<float>(), nullptr, nullptr, nullptr,
-                                                 partial.data<double>(), g, kChannelChunk, chunks});
+                                                 partial.data<double>(), g, kChannelChunk, chunks,
+                                                 ActGate<float>{}});
   }
   Launch::launch(g.c, BatchNormStatsBody<float>{x.data<float>(), data_or_null<double>(partial),
                                                 a.in[3].data<float>(), a.in[4].data<float>(),
@@ -328,10 +367,12 @@ void batch_norm_op(const KernelArgs& a) {
   Launch::launch(x.numel(),
                  BatchNormApplyBody<float>{x.data<float>(), data_or_null<float>(a.in[1]),
                                            data_or_null<float>(a.in[2]), a.out[1].data<float>(),
-                                           a.out[2].data<float>(), a.out[0].data<float>(), g});
+                                           a.out[2].data<float>(), a.out[0].data<float>(), g,
+                                           p.fused_act, p.act.op, static_cast<float>(p.act.a),
+                                           static_cast<float>(p.act.b)});
 }
 
-// in {gy, x, gamma?, mean, invstd}, out {gx?, ggamma?, gbeta?}.
+// in {gy, x, gamma?, mean, invstd[, beta? with fused_act]}, out {gx?, ggamma?, gbeta?}.
 template <class Launch>
 void batch_norm_backward_op(const KernelArgs& a) {
   const Tensor &gy = a.in[0], &x = a.in[1];
@@ -340,16 +381,17 @@ void batch_norm_backward_op(const KernelArgs& a) {
   const Tensor partial = Tensor::empty({g.c * chunks * 2}, DType::f64, x.device());
   const Tensor sums = Tensor::empty({2 * g.c}, DType::f32, x.device());
   auto out = [&](size_t k) { return k < a.out.size() ? data_or_null<float>(a.out[k]) : nullptr; };
-  Launch::launch(g.c * chunks,
-                 ChannelPartialSumsBody<float>{x.data<float>(), gy.data<float>(),
-                                               a.in[3].data<float>(), a.in[4].data<float>(),
-                                               partial.data<double>(), g, kChannelChunk, chunks});
+  Launch::launch(g.c * chunks, ChannelPartialSumsBody<float>{
+                                   x.data<float>(), gy.data<float>(), a.in[3].data<float>(),
+                                   a.in[4].data<float>(), partial.data<double>(), g, kChannelChunk,
+                                   chunks, act_gate<float>(a)});
   Launch::launch(g.c, BatchNormBackwardSumsBody<float>{partial.data<double>(), sums.data<float>(),
                                                        g.c, chunks});
-  Launch::launch(x.numel(), BatchNormBackwardDataBody<float>{
-                                gy.data<float>(), x.data<float>(), data_or_null<float>(a.in[2]),
-                                a.in[3].data<float>(), a.in[4].data<float>(), sums.data<float>(),
-                                out(0), out(1), out(2), g, a.p<BatchNormParams>().training});
+  Launch::launch(x.numel(),
+                 BatchNormBackwardDataBody<float>{
+                     gy.data<float>(), x.data<float>(), data_or_null<float>(a.in[2]),
+                     a.in[3].data<float>(), a.in[4].data<float>(), sums.data<float>(), out(0),
+                     out(1), out(2), g, a.p<BatchNormParams>().training, act_gate<float>(a)});
 }
 
 template <class Launch>

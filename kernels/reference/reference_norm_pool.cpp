@@ -87,20 +87,53 @@ void batch_norm(const KernelArgs& a) {
     for (int64_t n = 0; n < l.n; ++n) {
       for (int64_t i = 0; i < l.inner; ++i) {
         const int64_t k = l.index(n, c, i);
-        yp[k] = (xp[k] - mu) * istd * scale + shift;
+        const double pre = (xp[k] - mu) * istd * scale + shift;
+        yp[k] = p.fused_act ? unary_forward(p.act.op, pre, p.act.a, p.act.b) : pre;
       }
     }
   }
 }
 
-// in {gy, x, gamma?, mean [C], invstd [C]}, out {gx?, ggamma?, gbeta?}; BatchNormParams.
-// With xhat = (x - mean) * invstd:  gbeta = sum gy,  ggamma = sum gy * xhat,
+// in {gy, x, gamma?, mean [C], invstd [C][, beta? with fused_act]}, out {gx?, ggamma?, gbeta?};
+// BatchNormParams. A fused activation first takes gy through act at the pre-activation
+// gamma * xhat + beta; then, with xhat = (x - mean) * invstd:  gbeta = sum gy,
+// ggamma = sum gy * xhat,
 // training: gx = gamma * invstd * (gy - gbeta / m - xhat * ggamma / m)  (m values per channel;
 //           the gradient flows through the batch statistics),
 // eval:     gx = gamma * invstd * gy  (the statistics are constants).
+namespace {
+
+// gy taken back through the fused activation: act'(gamma * (x - mean) * invstd + beta) * gy.
+Tensor activation_gradient(const Tensor& gy, const Tensor& x, const Tensor& gamma,
+                           const Tensor& beta, const Tensor& mean, const Tensor& invstd,
+                           const BatchNormParams& p, const ChannelLayout& l) {
+  CVD_ASSERT(!beta.defined() || is_channel_vector(beta, l.c));
+  Tensor out = Tensor::empty(gy.shape(), DType::f64);
+  const double *gyp = gy.data<double>(), *xp = x.data<double>();
+  double* op = out.data<double>();
+  for (int64_t c = 0; c < l.c; ++c) {
+    const double scale = gamma.defined() ? gamma.data<double>()[c] : 1.0;
+    const double shift = beta.defined() ? beta.data<double>()[c] : 0.0;
+    for (int64_t n = 0; n < l.n; ++n) {
+      for (int64_t i = 0; i < l.inner; ++i) {
+        const int64_t k = l.index(n, c, i);
+        const double pre =
+            (xp[k] - mean.data<double>()[c]) * invstd.data<double>()[c] * scale + shift;
+        const double y = unary_forward(p.act.op, pre, p.act.a, p.act.b);
+        op[k] = unary_backward(p.act.op, gyp[k], pre, y, p.act.a, p.act.b);
+      }
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
 void batch_norm_backward(const KernelArgs& a) {
-  CVD_ASSERT(a.in.size() == 5 && a.out.size() == 3 && a.params != nullptr);
-  const Tensor& gy = a.in[0];
+  CVD_ASSERT(a.params != nullptr && a.out.size() == 3);
+  const BatchNormParams& p = a.p<BatchNormParams>();
+  CVD_ASSERT(a.in.size() == (p.fused_act ? 6u : 5u));
+  const Tensor& gy_in = a.in[0];
   const Tensor& x = a.in[1];
   const Tensor& gamma = a.in[2];
   const Tensor& mean = a.in[3];
@@ -108,9 +141,10 @@ void batch_norm_backward(const KernelArgs& a) {
   const Tensor& gx = a.out[0];
   const Tensor& ggamma = a.out[1];
   const Tensor& gbeta = a.out[2];
-  const BatchNormParams& p = a.p<BatchNormParams>();
-  CVD_ASSERT(is_f64_contiguous(gy) && is_f64_contiguous(x) && gy.shape() == x.shape());
+  CVD_ASSERT(is_f64_contiguous(gy_in) && is_f64_contiguous(x) && gy_in.shape() == x.shape());
   const ChannelLayout l = channel_layout(x);
+  const Tensor gy =
+      p.fused_act ? activation_gradient(gy_in, x, gamma, a.in[5], mean, invstd, p, l) : gy_in;
   CVD_ASSERT(!gamma.defined() || is_channel_vector(gamma, l.c));
   CVD_ASSERT(is_channel_vector(mean, l.c) && is_channel_vector(invstd, l.c));
   CVD_ASSERT(!gx.defined() || (is_f64_contiguous(gx) && gx.shape() == x.shape()));

@@ -152,15 +152,18 @@ BatchNormForward batch_norm_forward(const char* op, const Tensor& x_in, const Te
   return f;
 }
 
-// d(loss)/d(x, gamma, beta) of a batch norm from d(loss)/d(y).
+// d(loss)/d(x, gamma, beta) of a batch norm from d(loss)/d(y), y = act(bn(x)) with a fused
+// activation (whose mask needs beta, bs).
 std::vector<Tensor> batch_norm_grads(const Tensor& g, const Tensor& xs, const Tensor& gs,
-                                     bool has_beta, const Tensor& mean, const Tensor& invstd,
+                                     const Tensor& bs, const Tensor& mean, const Tensor& invstd,
                                      const BatchNormParams& p, const std::vector<bool>& need) {
   int64_t c = xs.size(1);
   Tensor gx = need[0] ? empty_like_kind(xs.shape(), xs) : Tensor();
   Tensor gg = gs.defined() && need[1] ? empty_like_kind({c}, xs) : Tensor();
-  Tensor gb = has_beta && need[2] ? empty_like_kind({c}, xs) : Tensor();
-  dispatch(OpId::batch_norm_backward, g, KernelArgs{{g, xs, gs, mean, invstd}, {gx, gg, gb}, &p});
+  Tensor gb = bs.defined() && need[2] ? empty_like_kind({c}, xs) : Tensor();
+  KernelArgs a{{g, xs, gs, mean, invstd}, {gx, gg, gb}, &p};
+  if (p.fused_act) a.in.push_back(bs);
+  dispatch(OpId::batch_norm_backward, g, a);
   return {gx, gg, gb};
 }
 
@@ -187,10 +190,9 @@ Tensor batch_norm(const Tensor& x_in, const Tensor& running_mean, const Tensor& 
   if (!any_requires_grad({f.x, f.gamma, f.beta})) return f.y;
   return record("batch_norm", f.y, {f.x, f.gamma, f.beta},
                 [xs = f.x.detach(), gs = f.gamma.defined() ? f.gamma.detach() : Tensor(),
-                 has_beta = f.beta.defined(), mean = f.mean, invstd = f.invstd,
-                 p](const Tensor& g_in, const std::vector<bool>& need) {
-                  return batch_norm_grads(g_in.contiguous(), xs, gs, has_beta, mean, invstd, p,
-                                          need);
+                 bs = f.beta.defined() ? f.beta.detach() : Tensor(), mean = f.mean,
+                 invstd = f.invstd, p](const Tensor& g_in, const std::vector<bool>& need) {
+                  return batch_norm_grads(g_in.contiguous(), xs, gs, bs, mean, invstd, p, need);
                 });
 }
 
@@ -219,14 +221,7 @@ Tensor batch_norm_act(const Tensor& x_in, const Tensor& running_mean, const Tens
   record("batch_norm_act", z, {f.x, f.gamma, f.beta},
          [xs, gs, bs, mean = f.mean, invstd = f.invstd, p](const Tensor& g_in,
                                                            const std::vector<bool>& need) {
-           const int64_t c = xs.size(1);
-           Tensor g = g_in.contiguous();
-           Tensor gx = need[0] ? empty_like_kind(xs.shape(), xs) : Tensor();
-           Tensor gg = gs.defined() && need[1] ? empty_like_kind({c}, xs) : Tensor();
-           Tensor gb = bs.defined() && need[2] ? empty_like_kind({c}, xs) : Tensor();
-           dispatch(OpId::batch_norm_backward, g,
-                    KernelArgs{{g, xs, gs, mean, invstd, bs}, {gx, gg, gb}, &p});
-           return std::vector<Tensor>{gx, gg, gb};
+           return batch_norm_grads(g_in.contiguous(), xs, gs, bs, mean, invstd, p, need);
          });
   // Its consumers (convolutions) may recompute z instead of keeping it.
   mark_rematerializable(z, [xs, gs, bs, mean = f.mean, var, p] {

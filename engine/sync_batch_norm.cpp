@@ -16,6 +16,7 @@ namespace cvd {
 Tensor sync_batch_norm(const Tensor& x, const Tensor& running_mean, const Tensor& running_var,
                        const Tensor& gamma, const Tensor& beta, const BatchNormParams& p) {
   CVD_CHECK(x.dim() == 4, "sync_batch_norm: x {} must be 4-d NCHW", x.str());
+  CVD_CHECK(!p.fused_act, "sync_batch_norm: no fused activation (apply it to the output)");
   const int64_t c = x.size(1);
   double count = static_cast<double>(x.numel() / c);
   process_group().all_reduce_sum(&count, 1);

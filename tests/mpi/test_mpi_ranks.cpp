@@ -81,6 +81,11 @@ TEST(Mpi, SyncBatchNormEqualsOneProcessOverTheWholeBatch) {
   EXPECT_LT(relative_l2(beta.grad(), gb_ref), 1e-12);
   EXPECT_LT(relative_l2(rm, rm_ref), 1e-12);
   EXPECT_LT(relative_l2(rv, rv_ref), 1e-12);
+  // Its backward has no activation mask: a fused activation is refused on every rank alike.
+  BatchNormParams fused = p;
+  fused.fused_act = true;
+  fused.act = UnaryParams{UnaryOp::relu};
+  EXPECT_THROW(sync_batch_norm(xs.detach(), rm, rv, gamma, beta, fused), Error);
 }
 
 TEST(Mpi, BatchNormModuleSynchronisesOnlyInsideTheScope) {

@@ -94,13 +94,6 @@ void batch_norm(const KernelArgs& a) {
   }
 }
 
-// in {gy, x, gamma?, mean [C], invstd [C][, beta? with fused_act]}, out {gx?, ggamma?, gbeta?};
-// BatchNormParams. A fused activation first takes gy through act at the pre-activation
-// gamma * xhat + beta; then, with xhat = (x - mean) * invstd:  gbeta = sum gy,
-// ggamma = sum gy * xhat,
-// training: gx = gamma * invstd * (gy - gbeta / m - xhat * ggamma / m)  (m values per channel;
-//           the gradient flows through the batch statistics),
-// eval:     gx = gamma * invstd * gy  (the statistics are constants).
 namespace {
 
 // gy taken back through the fused activation: act'(gamma * (x - mean) * invstd + beta) * gy.
@@ -112,13 +105,13 @@ Tensor activation_gradient(const Tensor& gy, const Tensor& x, const Tensor& gamm
   const double *gyp = gy.data<double>(), *xp = x.data<double>();
   double* op = out.data<double>();
   for (int64_t c = 0; c < l.c; ++c) {
+    const double mu = mean.data<double>()[c], istd = invstd.data<double>()[c];
     const double scale = gamma.defined() ? gamma.data<double>()[c] : 1.0;
     const double shift = beta.defined() ? beta.data<double>()[c] : 0.0;
     for (int64_t n = 0; n < l.n; ++n) {
       for (int64_t i = 0; i < l.inner; ++i) {
         const int64_t k = l.index(n, c, i);
-        const double pre =
-            (xp[k] - mean.data<double>()[c]) * invstd.data<double>()[c] * scale + shift;
+        const double pre = (xp[k] - mu) * istd * scale + shift;
         const double y = unary_forward(p.act.op, pre, p.act.a, p.act.b);
         op[k] = unary_backward(p.act.op, gyp[k], pre, y, p.act.a, p.act.b);
       }
@@ -129,6 +122,13 @@ Tensor activation_gradient(const Tensor& gy, const Tensor& x, const Tensor& gamm
 
 }  // namespace
 
+// in {gy, x, gamma?, mean [C], invstd [C][, beta? with fused_act]}, out {gx?, ggamma?, gbeta?};
+// BatchNormParams. A fused activation first takes gy through act at the pre-activation
+// gamma * xhat + beta; then, with xhat = (x - mean) * invstd:  gbeta = sum gy,
+// ggamma = sum gy * xhat,
+// training: gx = gamma * invstd * (gy - gbeta / m - xhat * ggamma / m)  (m values per channel;
+//           the gradient flows through the batch statistics),
+// eval:     gx = gamma * invstd * gy  (the statistics are constants).
 void batch_norm_backward(const KernelArgs& a) {
   CVD_ASSERT(a.params != nullptr && a.out.size() == 3);
   const BatchNormParams& p = a.p<BatchNormParams>();
@@ -143,10 +143,10 @@ void batch_norm_backward(const KernelArgs& a) {
   const Tensor& gbeta = a.out[2];
   CVD_ASSERT(is_f64_contiguous(gy_in) && is_f64_contiguous(x) && gy_in.shape() == x.shape());
   const ChannelLayout l = channel_layout(x);
-  const Tensor gy =
-      p.fused_act ? activation_gradient(gy_in, x, gamma, a.in[5], mean, invstd, p, l) : gy_in;
   CVD_ASSERT(!gamma.defined() || is_channel_vector(gamma, l.c));
   CVD_ASSERT(is_channel_vector(mean, l.c) && is_channel_vector(invstd, l.c));
+  const Tensor gy =
+      p.fused_act ? activation_gradient(gy_in, x, gamma, a.in[5], mean, invstd, p, l) : gy_in;
   CVD_ASSERT(!gx.defined() || (is_f64_contiguous(gx) && gx.shape() == x.shape()));
   CVD_ASSERT(!ggamma.defined() || is_channel_vector(ggamma, l.c));
   CVD_ASSERT(!gbeta.defined() || is_channel_vector(gbeta, l.c));

@@ -48,6 +48,7 @@ RunOptions to_run_options(const PipelineOptions& p) {
   o.lr = p.lr;
   o.lambda_disparity = p.lambda_disparity;
   o.seed = p.seed;
+  o.ensemble = p.ensemble;
   o.warmup_steps = p.warmup_steps;
   o.warmup_scale = p.warmup_scale;
   o.refine_poses = p.refine_poses;

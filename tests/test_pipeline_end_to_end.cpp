@@ -11,6 +11,7 @@
 #include "pipeline/eval/eval_depth_metrics.h"
 #include "pipeline/io/pfm_io.h"
 #include "pipeline/io/trajectory_io.h"
+#include "pipeline/run/ensemble_stage.h"
 #include "pipeline/run/run_pipeline.h"
 #include "scene/synthetic_scene.h"
 #include "test_support.h"
@@ -235,6 +236,74 @@ TEST(PipelineEndToEnd, ConvertedNetworksWithoutSparsePointsAreTiedToTheFlowsDept
     const double t_out = (r.cameras[5].pose.t - r.cameras[0].pose.t).norm();
     EXPECT_NEAR(t_out, t_in * (affine ? 1.0 : scale), 1e-6 * t_out) << arch;
   }
+}
+
+}  // namespace
+}  // namespace cvd
+
+namespace cvd {
+namespace {
+
+// The largest |log(x / y)| over the pixels of two depth videos.
+double max_abs_log_ratio(const std::vector<cv::Mat>& x, const std::vector<cv::Mat>& y) {
+  double worst = 0;
+  for (size_t f = 0; f < x.size(); ++f) {
+    cv::Mat r;
+    cv::divide(x[f], y[f], r, 1.0, CV_64F);
+    cv::log(r, r);
+    double lo = 0, hi = 0;
+    cv::minMaxLoc(r, &lo, &hi);
+    worst = std::max({worst, -lo, hi});
+  }
+  return worst;
+}
+
+std::vector<cv::Mat> read_depth_folder(const fs::path& dir, const std::vector<std::string>& names) {
+  std::vector<cv::Mat> v;
+  for (const std::string& n : names) v.push_back(read_pfm(dir / (n + ".pfm")));
+  return v;
+}
+
+// --ensemble 2 writes, before and after training, the per-pixel geometric mean of the depths the
+// runs with seeds 1 and 2 write alone, and refuses camera refinement.
+TEST(PipelineEndToEnd, AnEnsembleIsTheGeometricMeanOfItsSeedsRuns) {
+  test::TempDir dir;
+  SceneGroundTruth gt = write_scene(dir.path(), 6);
+  auto options = [&](uint64_t seed, int ensemble, const char* out) {
+    RunOptions o = scene_run(dir.path(), gt, dir / "scene" / "poses.txt", dir / out);
+    o.depth_long_side = 96;
+    o.epochs = 1;
+    o.warmup_steps = 10;
+    o.seed = seed;
+    o.ensemble = ensemble;
+    return o;
+  };
+  const RunResult a = run_pipeline(options(1, 1, "seed1"));
+  const RunResult b = run_pipeline(options(2, 1, "seed2"));
+  const RunResult e = run_pipeline(options(1, 2, "ensemble"));
+  ASSERT_EQ(e.depths.size(), a.depths.size());
+  const std::vector<cv::Mat> expected = geometric_mean_depths({a.depths, b.depths});
+  // The seeds' depths differ (so the mean is neither), the ensemble's is their mean.
+  EXPECT_GT(max_abs_log_ratio(a.depths, b.depths), 1e-2);
+  EXPECT_LT(max_abs_log_ratio(e.depths, expected), 1e-5);
+  auto initial = [&](const char* out) {
+    return read_depth_folder(dir / out / "depth_initial", a.frame_names);
+  };
+  const std::vector<cv::Mat> expected_initial =
+      geometric_mean_depths({initial("seed1"), initial("seed2")});
+  EXPECT_GT(max_abs_log_ratio(initial("seed1"), initial("seed2")), 1e-2);
+  EXPECT_LT(max_abs_log_ratio(initial("ensemble"), expected_initial), 1e-5);
+  const nlohmann::json& info = e.run_info.at("ensemble");
+  EXPECT_EQ(info.at("networks"), 2);
+  ASSERT_EQ(info.at("more_networks").size(), 1u);
+  EXPECT_EQ(info.at("more_networks")[0].at("seed"), 2);
+  EXPECT_EQ(info.at("more_networks")[0].at("epoch_losses"),
+            b.run_info.at("training").at("epoch_losses"));
+
+  RunOptions refine = options(1, 2, "refined");
+  refine.refine_poses = "rotation";
+  EXPECT_THROW(run_pipeline(refine), Error);
+  EXPECT_FALSE(fs::exists(dir / "refined" / "run.json"));
 }
 
 }  // namespace

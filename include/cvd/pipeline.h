@@ -90,6 +90,7 @@ struct PipelineOptions {
   double lr = 0;                 ///< --lr
   double lambda_disparity = -1;  ///< --lambda
   std::uint64_t seed = 1;        ///< --seed
+  int ensemble = 1;              ///< --ensemble: networks trained and averaged
   int warmup_steps = 100;        ///< --warmup
   /// --warmup-scale: the warm-up fits sparse depths up to one scale per "frame", in absolute
   /// log depth ("video"), or "auto" (frame for flow-track points of given poses, else video)

@@ -85,6 +85,9 @@ struct RunOptions {
   double lr = 0;
   double lambda_disparity = -1;
   uint64_t seed = 1;
+  // Networks trained (stages 6 and 7 repeated with seeds seed, seed + 1, ...) and averaged
+  // (per-pixel geometric mean of their depth; pipeline/run/ensemble_stage.h). 1: one network.
+  int ensemble = 1;
   int warmup_steps = 100;  // default network only: fit sparse SfM depth first
   // How the warm-up fits the sparse depths: "frame" (log depth up to one scale per frame), "video"
   // (absolute log depth, one scale for the video) or "auto" (frame for points triangulated from

@@ -28,6 +28,7 @@
 #include "pipeline/io/pfm_io.h"
 #include "pipeline/poses/keyframe_selection.h"
 #include "pipeline/run/depth_inference.h"
+#include "pipeline/run/ensemble_stage.h"
 #include "pipeline/run/flow_pair_source.h"
 #include "pipeline/run/initial_depth_stage.h"
 #include "pipeline/run/run_outputs.h"
@@ -110,6 +111,13 @@ RunResult run_pipeline(const RunOptions& o) {
             "sparse_points must be flow, colmap or auto, got '{}'", o.sparse_points);
   parse_keyframe_mode(o.colmap_keyframes, "colmap_keyframes");
   CVD_CHECK(o.steps >= 0, "steps must be >= 0 (0: every pair once per epoch), got {}", o.steps);
+  CVD_CHECK(o.ensemble >= 1, "ensemble must be >= 1 (networks to train and average), got {}",
+            o.ensemble);
+  // Each network would refine the cameras its own way; the outputs have one set of cameras.
+  CVD_CHECK(o.ensemble == 1 || (o.refine_poses == "none" && !o.refine_focal),
+            "ensemble {} with refine_poses {}{}: refining the cameras needs one network "
+            "(--ensemble 1)",
+            o.ensemble, o.refine_poses, o.refine_focal ? " and refine_focal" : "");
   CVD_CHECK(o.pair_storage == "auto" || o.pair_storage == "memory" || o.pair_storage == "stream",
             "pair_storage must be auto, memory or stream, got '{}'", o.pair_storage);
   for (const std::string& f : o.depth_formats)
@@ -200,6 +208,7 @@ RunResult run_pipeline(const RunOptions& o) {
   const SparsePointsStage points = run_sparse_points_stage(poses, flow, cams, usable);
 
   // 6. Initial depth, scale calibration / default-network initialisation
+  const std::vector<NamedCamera> cams_before_start = cams;  // for more networks (--ensemble)
   t = Clock::now();
   InitialDepthStage initial = run_initial_depth_stage(o, *net, load_frame, points, cams, dsize);
   timings["initial_depth"] = since(t);
@@ -222,6 +231,30 @@ RunResult run_pipeline(const RunOptions& o) {
   t = Clock::now();
   RunOutputs outs;
   outs.depths = infer_depths(*net, load_frame, n, dsize, o, "final depth");
+  timings["outputs"] = since(t);
+
+  // 6-7 again for more networks (--ensemble), their depths averaged with the first's.
+  t = Clock::now();
+  EnsembleInputs more;
+  more.make_network = [&](uint64_t seed) {
+    RunOptions om = o;
+    om.seed = seed;
+    std::string description;
+    return load_network(om, description);
+  };
+  more.load_frame = load_frame;
+  more.points = &points;
+  more.flow = &flow;
+  more.usable = &usable;
+  more.poses_source = poses.source;
+  more.precision = precision;
+  more.cameras = cams_before_start;
+  more.depth_size = dsize;
+  more.cache = cache;
+  net.reset();  // one network in memory at a time
+  const json ensemble = run_ensemble_members(o, more, initial.depths, outs.depths);
+  if (!ensemble.is_null()) timings["ensemble"] = since(t);
+  t = Clock::now();
   if (pg.rank() != 0) {
     res.frame_names = frames.names;
     res.cameras = cams;
@@ -255,7 +288,7 @@ RunResult run_pipeline(const RunOptions& o) {
   fs::create_directories(o.out / "depth_initial");
   for (int k = 0; k < n; ++k)
     write_pfm(o.out / "depth_initial" / (frames.names[k] + ".pfm"), initial.depths[k]);
-  timings["outputs"] = since(t);
+  timings["outputs"] = timings["outputs"].get<double>() + since(t);
   timings["total"] = since(t_all);
 
   int registered = 0;
@@ -285,6 +318,7 @@ RunResult run_pipeline(const RunOptions& o) {
                      cams[0].intrinsics.cy}},
                    {"details", poses.info}};
   info["calibration"] = initial.calibration;
+  if (!ensemble.is_null()) info["ensemble"] = ensemble;
   if (!tr.refinement.is_null()) info["camera_refinement"] = tr.refinement;
   {
     int64_t count = 0;

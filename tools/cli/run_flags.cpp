@@ -131,6 +131,10 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s, bool grou
                             "--model weights ({})",
                             cvd::kUntrainedNetworkLambda, lambda_defaults));
   c->add_option("--seed", o.seed, "Random seed");
+  c->add_option("--ensemble", o.ensemble,
+                "Depth networks to train (seeds --seed, --seed + 1, ...) and average (per-pixel "
+                "geometric mean); each costs the warm-up and training time again")
+      ->check(CLI::Range(1, 100));
   s.warmup = c->add_option("--warmup", o.warmup_steps,
                            "Sparse-depth warm-up steps of the default network");
   c->add_option("--warmup-scale", o.warmup_scale,

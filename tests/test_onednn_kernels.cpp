@@ -185,6 +185,11 @@ const std::vector<ConvCase>& conv_cases() {
       {"1x1 expansion bias", 2, 24, 5, 6, 96, 1, 1, conv_params(1, 0, 0, 0, 0), true},
       {"1x1 single image", 1, 7, 3, 5, 9, 1, 1, conv_params(1, 0, 0, 0, 0), true},
       {"1x1 stride 2", 2, 8, 7, 6, 12, 1, 1, conv_params(2, 0, 0, 0, 0), true},
+      // 4096 pixels: forward and backward data through sgemm by default (use_pointwise_gemm).
+      {"1x1 16->8 64x64", 2, 16, 64, 64, 8, 1, 1, conv_params(1, 0, 0, 0, 0), true},
+      {"1x1 8->20 48x96", 1, 8, 48, 96, 20, 1, 1, conv_params(1, 0, 0, 0, 0), false},
+      {"1x1 16->1 64x64 (backward data on the matmul)", 1, 16, 64, 64, 1, 1, 1,
+       conv_params(1, 0, 0, 0, 0), true},
       {"11x11 s1 p5", 1, 16, 13, 12, 16, 11, 11, conv_params(1, 5, 5, 5, 5), true},
       // Narrow outputs (< 16 channels): backward data as a forward convolution with flipped,
       // transposed weights where eligible (unit stride, no dilation, pads <= k - 1).
@@ -288,6 +293,21 @@ TEST(OnednnConv, MatchesReferenceWithBackwardDataAsForwardEverywhereOrNowhere) {
   for (int mode : {1, 0}) {
     SCOPED_TRACE(mode ? "everywhere eligible" : "nowhere");
     BackwardDataAsForwardOverride o(mode);
+    for (const ConvCase& cc : conv_cases()) check_conv_case(cc);
+  }
+}
+
+// The pointwise passes through sgemm on every image size, and on none (the default takes it from
+// 4096 pixels up).
+struct PointwiseGemmOverride {
+  explicit PointwiseGemmOverride(int mode) { onednn::set_pointwise_gemm_override(mode); }
+  ~PointwiseGemmOverride() { onednn::set_pointwise_gemm_override(-1); }
+};
+
+TEST(OnednnConv, MatchesReferenceWithPointwiseGemmEverywhereOrNowhere) {
+  for (int mode : {1, 0}) {
+    SCOPED_TRACE(mode ? "sgemm on every size" : "matmul primitive on every size");
+    PointwiseGemmOverride o(mode);
     for (const ConvCase& cc : conv_cases()) check_conv_case(cc);
   }
 }

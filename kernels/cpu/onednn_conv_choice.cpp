@@ -16,6 +16,16 @@ std::atomic<size_t> g_chunk_budget_override{0};
 std::atomic<int> g_depthwise_override{-1};
 std::atomic<int> g_pointwise_override{-1};
 std::atomic<int> g_backward_data_as_forward_override{-1};
+std::atomic<int> g_pointwise_gemm_override{-1};
+
+// Images of at least this many pixels take the sgemm path of use_pointwise_gemm() (64x64).
+constexpr int64_t kPointwiseGemmMinPixels = 4096;
+
+// An environment switch "0" / "1" as 0 / 1; -1 when unset or anything else.
+int switch_from_env(const char* name) {
+  const char* e = std::getenv(name);
+  return e && (e[0] == '0' || e[0] == '1') && e[1] == '\0' ? e[0] - '0' : -1;
+}
 
 // Reordered activation bytes (input and output side) of one chunk above which the batch is split:
 // the chunk's blocked copies should still be in the shared cache when the primitive and the
@@ -36,6 +46,7 @@ void set_conv_chunk_budget_override(size_t bytes) { g_chunk_budget_override = by
 void set_depthwise_kernel_override(int mode) { g_depthwise_override = mode; }
 void set_pointwise_matmul_override(int mode) { g_pointwise_override = mode; }
 void set_backward_data_as_forward_override(int mode) { g_backward_data_as_forward_override = mode; }
+void set_pointwise_gemm_override(int mode) { g_pointwise_gemm_override = mode; }
 
 void choose_conv_precision(ConvProblem& p) {
   const int64_t g = std::max<int64_t>(p.groups, 1);
@@ -67,13 +78,17 @@ bool use_backward_data_as_forward(const ConvProblem& p) {
         p.pad_r[size_t(i)] > p.weights[size_t(2 + i)] - 1)
       return false;
   // CVD_CONV_BWD_DATA_AS_FORWARD=0 turns the path off, =1 takes it on every eligible problem.
-  static const int from_env = [] {
-    const char* e = std::getenv("CVD_CONV_BWD_DATA_AS_FORWARD");
-    return e && (e[0] == '0' || e[0] == '1') ? e[0] - '0' : -1;
-  }();
+  static const int from_env = switch_from_env("CVD_CONV_BWD_DATA_AS_FORWARD");
   int forced = g_backward_data_as_forward_override.load();
   if (forced < 0) forced = from_env;
   return forced < 0 ? p.dst[1] < 16 : forced == 1;
+}
+
+bool use_pointwise_gemm(int64_t pixels, int64_t inner) {
+  static const int from_env = switch_from_env("CVD_POINTWISE_GEMM");
+  int forced = g_pointwise_gemm_override.load();
+  if (forced < 0) forced = from_env;
+  return forced < 0 ? pixels >= kPointwiseGemmMinPixels && inner >= 2 : forced == 1;
 }
 
 bool use_depthwise_kernel(const ConvProblem& p, ConvPass /*pass*/) {

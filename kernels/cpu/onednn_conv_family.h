@@ -62,6 +62,16 @@ void pointwise_conv_backward_data(const Tensor& gy, const Tensor& w, const Tenso
 void pointwise_conv_backward_weight(const Tensor& gy, const Tensor& x, const Tensor& gw,
                                     const Tensor& gb);
 
+// Whether a pointwise forward or backward-data pass on images of `pixels` pixels, summing over
+// `inner` channels (the input's for forward, the output's for backward data), runs as oneDNN's
+// sgemm (one call per image) instead of the matmul primitive. On large images sgemm was 1.1-2.1x
+// faster for both passes (Mannequin's full-resolution 1x1 layers, e.g. 64 <- 128 channels at
+// 224x384: 166 against 130 GFLOP/s forward; Intel Xeon, 2 threads), except for a sum over one
+// channel (0.8x); the matmul primitive is faster for backward weights, which keeps it, and on small
+// images (MiDaS small's 16x20) neither wins steadily. CVD_POINTWISE_GEMM=0 / 1 turns it off / on
+// for every problem.
+bool use_pointwise_gemm(int64_t pixels, int64_t inner);
+
 // Backward data of a unit-stride, undilated, ungrouped convolution whose output has fewer than 16
 // channels, computed as the forward convolution of the output gradient with the weights flipped
 // and transposed ([C, O, KH, KW], pads KH-1-pad per side). oneDNN 2.6 runs such narrow backward
@@ -79,6 +89,7 @@ void set_conv_chunk_budget_override(size_t bytes);
 void set_depthwise_kernel_override(int mode);
 void set_pointwise_matmul_override(int mode);
 void set_backward_data_as_forward_override(int mode);
+void set_pointwise_gemm_override(int mode);
 
 // Sum of gy [N, C, H, W] over N, H and W into gb [C] (f64 accumulation). bf16 backward-weights
 // passes compute the bias gradient with this instead of the primitive: oneDNN 2.6's AMX kernel

@@ -4,7 +4,8 @@
 //   backward data:    gx_n [C, P] = W^T [C, O] gy_n [O, P]      (W^T as strides, no copy)
 //   backward weights: gW [O, C] = sum_n gy_n [O, P] x_n^T [P, C] (batched, then summed over n)
 // Measured faster than oneDNN's blocked 1x1 convolution even before counting its reorders
-// (bench/bench_conv.cpp, shape 1x1_96-576_16x20).
+// (bench/bench_conv.cpp, shape 1x1_96-576_16x20). On large images the forward and backward-data
+// products run as oneDNN's sgemm instead, one call per image (use_pointwise_gemm()).
 #include <cstring>
 #include <vector>
 
@@ -63,15 +64,30 @@ dnnl::memory memory_of(const Tensor& t, const dnnl::memory::desc& md) {
   return dnnl::memory(md, cpu_engine(), t.data_ptr());
 }
 
+// Row-major C [m, n] = op(A) [m, k] x B [k, n] with B and C dense (ldb = ldc = n), A [m, k]
+// ('N', lda = k) or its transpose stored as [k, m] ('T', lda = m).
+void sgemm(char transa, int64_t m, int64_t n, int64_t k, const float* a, const float* b, float* c) {
+  const dnnl_status_t st =
+      dnnl_sgemm(transa, 'N', m, n, k, 1.0f, a, transa == 'N' ? k : m, b, n, 0.0f, c, n);
+  CVD_CHECK(st == dnnl_success, "kernels/cpu/onednn_pointwise_conv.cpp: dnnl_sgemm failed ({})",
+            static_cast<int>(st));
+}
+
 }  // namespace
 
 void pointwise_conv_forward(const Tensor& x, const Tensor& w, const Tensor& b, const Tensor& y) {
   const int64_t n = x.size(0), c = x.size(1), o = y.size(1), p = x.size(2) * x.size(3);
-  MatmulPlan& e = plan(Pass::forward, n, o, c, p);
-  e.prim.execute(cpu_stream(), {{DNNL_ARG_SRC, memory_of(w, e.src)},
-                                {DNNL_ARG_WEIGHTS, memory_of(x, e.weights)},
-                                {DNNL_ARG_DST, memory_of(y, e.dst)}});
-  cpu_stream().wait();
+  if (use_pointwise_gemm(p, c)) {
+    for (int64_t i = 0; i < n; ++i)
+      sgemm('N', o, p, c, w.data<float>(), x.data<float>() + i * c * p,
+            y.data<float>() + i * o * p);
+  } else {
+    MatmulPlan& e = plan(Pass::forward, n, o, c, p);
+    e.prim.execute(cpu_stream(), {{DNNL_ARG_SRC, memory_of(w, e.src)},
+                                  {DNNL_ARG_WEIGHTS, memory_of(x, e.weights)},
+                                  {DNNL_ARG_DST, memory_of(y, e.dst)}});
+    cpu_stream().wait();
+  }
   if (!b.defined()) return;
   // The bias runs along the rows (M) of each product: oneDNN 2.6 serves that bias (or a
   // broadcast binary post-op) only with slower kernels than this separate pass (measured).
@@ -88,6 +104,12 @@ void pointwise_conv_forward(const Tensor& x, const Tensor& w, const Tensor& b, c
 
 void pointwise_conv_backward_data(const Tensor& gy, const Tensor& w, const Tensor& gx) {
   const int64_t n = gx.size(0), c = gx.size(1), o = gy.size(1), p = gx.size(2) * gx.size(3);
+  if (use_pointwise_gemm(p, o)) {
+    for (int64_t i = 0; i < n; ++i)  // gx_n = W^T gy_n, W stored [O, C]
+      sgemm('T', c, p, o, w.data<float>(), gy.data<float>() + i * o * p,
+            gx.data<float>() + i * c * p);
+    return;
+  }
   MatmulPlan& e = plan(Pass::backward_data, n, o, c, p);
   e.prim.execute(cpu_stream(), {{DNNL_ARG_SRC, memory_of(w, e.src)},
                                 {DNNL_ARG_WEIGHTS, memory_of(gy, e.weights)},

@@ -280,36 +280,30 @@ TEST(OnednnConv, MatchesReferenceWithDirectDepthwiseKernel) {
   for (const ConvCase& cc : conv_cases()) check_conv_case(cc);
 }
 
-// Backward data as a forward convolution (onednn_conv_family.h): on every eligible case, wide
-// outputs included, and on none (the default takes it for outputs under 16 channels only).
-struct BackwardDataAsForwardOverride {
-  explicit BackwardDataAsForwardOverride(int mode) {
-    onednn::set_backward_data_as_forward_override(mode);
-  }
-  ~BackwardDataAsForwardOverride() { onednn::set_backward_data_as_forward_override(-1); }
-};
-
-TEST(OnednnConv, MatchesReferenceWithBackwardDataAsForwardEverywhereOrNowhere) {
+// Every case with one of the kernels' on / off switches (onednn_conv_family.h: -1 automatic,
+// 0 never, 1 wherever eligible) forced on, then off; the automatic choice is restored after.
+void check_all_cases_with_switch_on_and_off(void (*set_switch)(int)) {
+  struct Restore {
+    void (*set)(int);
+    ~Restore() { set(-1); }
+  } restore{set_switch};
   for (int mode : {1, 0}) {
-    SCOPED_TRACE(mode ? "everywhere eligible" : "nowhere");
-    BackwardDataAsForwardOverride o(mode);
+    SCOPED_TRACE(mode ? "forced on" : "forced off");
+    set_switch(mode);
     for (const ConvCase& cc : conv_cases()) check_conv_case(cc);
   }
 }
 
-// The pointwise passes through sgemm on every image size, and on none (the default takes it from
-// 4096 pixels up).
-struct PointwiseGemmOverride {
-  explicit PointwiseGemmOverride(int mode) { onednn::set_pointwise_gemm_override(mode); }
-  ~PointwiseGemmOverride() { onednn::set_pointwise_gemm_override(-1); }
-};
+// Backward data as a forward convolution: on every eligible case, wide outputs included, and on
+// none (the default takes it for outputs under 16 channels only).
+TEST(OnednnConv, MatchesReferenceWithBackwardDataAsForwardEverywhereOrNowhere) {
+  check_all_cases_with_switch_on_and_off(onednn::set_backward_data_as_forward_override);
+}
 
+// The pointwise forward and backward-data passes through sgemm on every image size, and on none
+// (the default takes it from 4096 pixels up).
 TEST(OnednnConv, MatchesReferenceWithPointwiseGemmEverywhereOrNowhere) {
-  for (int mode : {1, 0}) {
-    SCOPED_TRACE(mode ? "sgemm on every size" : "matmul primitive on every size");
-    PointwiseGemmOverride o(mode);
-    for (const ConvCase& cc : conv_cases()) check_conv_case(cc);
-  }
+  check_all_cases_with_switch_on_and_off(onednn::set_pointwise_gemm_override);
 }
 
 TEST(OnednnConv, MatchesReferenceBatchSplitIntoChunks) {

@@ -13,7 +13,9 @@
 //                  NCHW kernel;
 //   ours_blocked   depthwise shapes on the hand-written kernel's channel-interleaved AVX-512
 //                  implementation at every stride (the default picks per stride);
-//   ours_portable  depthwise shapes on its portable implementation.
+//   ours_portable  depthwise shapes on its portable implementation;
+//   ours_matmul    pointwise shapes with every pass on oneDNN's matmul primitive (the default
+//                  runs forward and backward data on large images through sgemm).
 // bench/compare_conv.sh runs it and prints the table "shape pass ours raw ratio".
 #include <benchmark/benchmark.h>
 #include <oneapi/dnnl/dnnl.hpp>
@@ -65,6 +67,8 @@ const std::vector<ConvShape>& shapes() {
       {"dw5x5_576_16x20_s1", 8, 576, 16, 20, 576, 5, params(1, 2, 2, 576)},
       {"dw5x5_576_16x20_s2", 8, 576, 16, 20, 576, 5, params(2, 1, 2, 576)},
       {"1x1_96-576_16x20", 8, 96, 16, 20, 576, 1, params(1, 0, 0)},
+      // Mannequin's full-resolution inception 1x1 layers (sgemm for forward and backward data).
+      {"1x1_128-64_224x384", 8, 128, 224, 384, 64, 1, params(1, 0, 0)},
       // The default (width 1/8) Mannequin's narrow full-resolution layers, at `cvd run`'s 256 px
       // and 4 pairs a step; 2 -> 8 is the forward problem 8 -> 2's backward data equals (weights
       // flipped and transposed).
@@ -86,7 +90,15 @@ void set_flops(benchmark::State& state, const ConvShape& s) {
 
 // ---- Ours: through dispatch() on NCHW tensors ------------------------------------------------
 
-enum class Variant { ours, ours_nowcache, ours_nochunk, ours_onednn, ours_blocked, ours_portable };
+enum class Variant {
+  ours,
+  ours_nowcache,
+  ours_nochunk,
+  ours_onednn,
+  ours_blocked,
+  ours_portable,
+  ours_matmul
+};
 const char* variant_name(Variant v) {
   switch (v) {
     case Variant::ours:
@@ -101,6 +113,8 @@ const char* variant_name(Variant v) {
       return "ours_blocked";
     case Variant::ours_portable:
       return "ours_portable";
+    case Variant::ours_matmul:
+      return "ours_matmul";
   }
   return "";
 }
@@ -121,6 +135,7 @@ struct VariantScope {
     onednn::set_conv_chunk_budget_override(v == Variant::ours_nochunk ? size_t{1} << 40
                                                                       : ours_chunk_budget());
     onednn::set_depthwise_kernel_override(v == Variant::ours_onednn ? 0 : -1);
+    onednn::set_pointwise_gemm_override(v == Variant::ours_matmul ? 0 : -1);
     cpu::set_depthwise_kernel(v == Variant::ours_portable  ? cpu::DepthwiseKernel::portable
                               : v == Variant::ours_blocked ? cpu::DepthwiseKernel::blocked_avx512
                                                            : cpu::DepthwiseKernel::automatic);
@@ -129,6 +144,7 @@ struct VariantScope {
     onednn::set_weight_cache_enabled(true);
     onednn::set_conv_chunk_budget_override(0);
     onednn::set_depthwise_kernel_override(-1);
+    onednn::set_pointwise_gemm_override(-1);
     cpu::set_depthwise_kernel(cpu::DepthwiseKernel::automatic);
   }
 };
@@ -271,6 +287,7 @@ void register_all() {
       // kernel, nor pointwise ones, which run as matmuls on NCHW).
       const bool convolution = !depthwise && s.k > 1;
       if (convolution) variants.push_back(Variant::ours_nochunk);
+      if (!depthwise && s.k == 1) variants.push_back(Variant::ours_matmul);
       if (convolution && pass != Pass::bwd_weight) variants.push_back(Variant::ours_nowcache);
       for (Variant v : variants) {
         benchmark::RegisterBenchmark(

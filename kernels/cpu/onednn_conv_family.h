@@ -64,12 +64,11 @@ void pointwise_conv_backward_weight(const Tensor& gy, const Tensor& x, const Ten
 
 // Whether a pointwise forward or backward-data pass on images of `pixels` pixels, summing over
 // `inner` channels (the input's for forward, the output's for backward data), runs as oneDNN's
-// sgemm (one call per image) instead of the matmul primitive. On large images sgemm was 1.1-2.1x
-// faster for both passes (Mannequin's full-resolution 1x1 layers, e.g. 64 <- 128 channels at
-// 224x384: 166 against 130 GFLOP/s forward; Intel Xeon, 2 threads), except for a sum over one
-// channel (0.8x); the matmul primitive is faster for backward weights, which keeps it, and on small
-// images (MiDaS small's 16x20) neither wins steadily. CVD_POINTWISE_GEMM=0 / 1 turns it off / on
-// for every problem.
+// sgemm (one call per image) instead of the matmul primitive. On large images sgemm was faster
+// for both passes: 1.1-2.1x on warm buffers in a standalone check, 4-8% in bench_conv's
+// 1x1_128-64_224x384 (Intel Xeon, 2 threads); slower only for a sum over one channel (0.8x). The
+// matmul primitive is faster for backward weights, which keeps it, and on small images (MiDaS
+// small's 16x20) neither wins steadily. CVD_POINTWISE_GEMM=0 / 1 turns it off / on everywhere.
 bool use_pointwise_gemm(int64_t pixels, int64_t inner);
 
 // Backward data of a unit-stride, undilated, ungrouped convolution whose output has fewer than 16

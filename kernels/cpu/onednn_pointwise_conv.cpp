@@ -3,8 +3,9 @@
 //   forward:          y_n [O, P] = W [O, C] x_n [C, P] + b      (W broadcast over the batch)
 //   backward data:    gx_n [C, P] = W^T [C, O] gy_n [O, P]      (W^T as strides, no copy)
 //   backward weights: gW [O, C] = sum_n gy_n [O, P] x_n^T [P, C] (batched, then summed over n)
-// Measured faster than oneDNN's blocked 1x1 convolution even before counting its reorders
-// (bench/bench_conv.cpp, shape 1x1_96-576_16x20). On large images the forward and backward-data
+// Measured faster than oneDNN's blocked 1x1 convolution even before counting its reorders on
+// small images (bench/bench_conv.cpp, shape 1x1_96-576_16x20); on Mannequin's full-resolution
+// shape (1x1_128-64_224x384) oneDNN's convolution on data already in its layout is ~2x faster. On large images the forward and backward-data
 // products run as oneDNN's sgemm instead, one call per image (use_pointwise_gemm()).
 #include <cstring>
 #include <vector>

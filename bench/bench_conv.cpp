@@ -15,7 +15,9 @@
 //                  implementation at every stride (the default picks per stride);
 //   ours_portable  depthwise shapes on its portable implementation;
 //   ours_matmul    pointwise shapes with every pass on oneDNN's matmul primitive (the default
-//                  runs forward and backward data on large images through sgemm).
+//                  runs forward and backward data on large images through sgemm);
+//   ours_conv      pointwise shapes on oneDNN's convolution, with the reorders to and from its
+//                  blocked layout that every other convolution pays (no matmul, no sgemm).
 // bench/compare_conv.sh runs it and prints the table "shape pass ours raw ratio".
 #include <benchmark/benchmark.h>
 #include <oneapi/dnnl/dnnl.hpp>
@@ -69,6 +71,10 @@ const std::vector<ConvShape>& shapes() {
       {"1x1_96-576_16x20", 8, 96, 16, 20, 576, 1, params(1, 0, 0)},
       // Mannequin's full-resolution inception 1x1 layers (sgemm for forward and backward data).
       {"1x1_128-64_224x384", 8, 128, 224, 384, 64, 1, params(1, 0, 0)},
+      // Mannequin's half-resolution inception 1x1 layers, and the default (width 1/8) network's
+      // full-resolution ones at `cvd run`'s 256 px and 4 pairs a step.
+      {"1x1_256-64_112x192", 8, 256, 112, 192, 64, 1, params(1, 0, 0)},
+      {"1x1_16-8_192x256", 4, 16, 192, 256, 8, 1, params(1, 0, 0)},
       // The default (width 1/8) Mannequin's narrow full-resolution layers, at `cvd run`'s 256 px
       // and 4 pairs a step; 2 -> 8 is the forward problem 8 -> 2's backward data equals (weights
       // flipped and transposed).
@@ -97,7 +103,8 @@ enum class Variant {
   ours_onednn,
   ours_blocked,
   ours_portable,
-  ours_matmul
+  ours_matmul,
+  ours_conv
 };
 const char* variant_name(Variant v) {
   switch (v) {
@@ -115,6 +122,8 @@ const char* variant_name(Variant v) {
       return "ours_portable";
     case Variant::ours_matmul:
       return "ours_matmul";
+    case Variant::ours_conv:
+      return "ours_conv";
   }
   return "";
 }
@@ -136,6 +145,7 @@ struct VariantScope {
                                                                       : ours_chunk_budget());
     onednn::set_depthwise_kernel_override(v == Variant::ours_onednn ? 0 : -1);
     onednn::set_pointwise_gemm_override(v == Variant::ours_matmul ? 0 : -1);
+    onednn::set_pointwise_matmul_override(v == Variant::ours_conv ? 0 : -1);
     cpu::set_depthwise_kernel(v == Variant::ours_portable  ? cpu::DepthwiseKernel::portable
                               : v == Variant::ours_blocked ? cpu::DepthwiseKernel::blocked_avx512
                                                            : cpu::DepthwiseKernel::automatic);
@@ -145,6 +155,7 @@ struct VariantScope {
     onednn::set_conv_chunk_budget_override(0);
     onednn::set_depthwise_kernel_override(-1);
     onednn::set_pointwise_gemm_override(-1);
+    onednn::set_pointwise_matmul_override(-1);
     cpu::set_depthwise_kernel(cpu::DepthwiseKernel::automatic);
   }
 };
@@ -287,7 +298,8 @@ void register_all() {
       // kernel, nor pointwise ones, which run as matmuls on NCHW).
       const bool convolution = !depthwise && s.k > 1;
       if (convolution) variants.push_back(Variant::ours_nochunk);
-      if (!depthwise && s.k == 1) variants.push_back(Variant::ours_matmul);
+      if (!depthwise && s.k == 1)
+        variants.insert(variants.end(), {Variant::ours_matmul, Variant::ours_conv});
       if (convolution && pass != Pass::bwd_weight) variants.push_back(Variant::ours_nowcache);
       for (Variant v : variants) {
         benchmark::RegisterBenchmark(

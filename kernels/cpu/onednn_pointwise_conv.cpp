@@ -5,8 +5,15 @@
 //   backward weights: gW [O, C] = sum_n gy_n [O, P] x_n^T [P, C] (batched, then summed over n)
 // Measured faster than oneDNN's blocked 1x1 convolution even before counting its reorders on
 // small images (bench/bench_conv.cpp, shape 1x1_96-576_16x20); on Mannequin's full-resolution
-// shape (1x1_128-64_224x384) oneDNN's convolution on data already in its layout is ~2x faster. On large images the forward and backward-data
-// products run as oneDNN's sgemm instead, one call per image (use_pointwise_gemm()).
+// shape (1x1_128-64_224x384) oneDNN's convolution on data already in its layout is ~2x faster.
+// With the reorders every other convolution pays it beat sgemm only in the forward pass at that
+// resolution with 128 input channels (1.3-1.5x for 64 outputs, 1.0-1.1x for 16 and 32), tied in
+// backward data and lost elsewhere: 0.7x at 112x192 with 256 channels, 0.23-0.39x on the default
+// network's narrow layers (bench_conv variant ours_conv, 2026-12-06), so pointwise layers stay
+// here. On large images the forward and backward-data products run as oneDNN's sgemm, one call
+// per image (use_pointwise_gemm()); oneDNN 2.6's f32 matmul on these plain layouts runs the same
+// sgemm kernel (results bitwise equal), so that choice moves time, not results. Adding the bias
+// per cache-sized column block instead of in a separate pass gained nothing measurable (tried).
 #include <cstring>
 #include <vector>
 

@@ -14,8 +14,11 @@
 //   ours_blocked   depthwise shapes on the hand-written kernel's channel-interleaved AVX-512
 //                  implementation at every stride (the default picks per stride);
 //   ours_portable  depthwise shapes on its portable implementation;
-//   ours_matmul    pointwise shapes with every pass on oneDNN's matmul primitive (the default
-//                  runs forward and backward data on large images through sgemm);
+//   ours_sgemm     pointwise shapes with forward and backward data on large images through
+//                  oneDNN's sgemm (the default runs them on our AVX-512 kernel where the CPU has
+//                  it, cpu/pointwise_gemm.h);
+//   ours_matmul    pointwise shapes with every pass on oneDNN's matmul primitive (no sgemm, no
+//                  kernel of ours);
 //   ours_conv      pointwise shapes on oneDNN's convolution, with the reorders to and from its
 //                  blocked layout that every other convolution pays (no matmul, no sgemm).
 // bench/compare_conv.sh runs it and prints the table "shape pass ours raw ratio".
@@ -104,7 +107,8 @@ enum class Variant {
   ours_blocked,
   ours_portable,
   ours_matmul,
-  ours_conv
+  ours_conv,
+  ours_sgemm
 };
 const char* variant_name(Variant v) {
   switch (v) {
@@ -124,6 +128,8 @@ const char* variant_name(Variant v) {
       return "ours_matmul";
     case Variant::ours_conv:
       return "ours_conv";
+    case Variant::ours_sgemm:
+      return "ours_sgemm";
   }
   return "";
 }
@@ -146,6 +152,8 @@ struct VariantScope {
     onednn::set_depthwise_kernel_override(v == Variant::ours_onednn ? 0 : -1);
     onednn::set_pointwise_gemm_override(v == Variant::ours_matmul ? 0 : -1);
     onednn::set_pointwise_matmul_override(v == Variant::ours_conv ? 0 : -1);
+    onednn::set_pointwise_kernel_override(
+        v == Variant::ours_sgemm || v == Variant::ours_matmul || v == Variant::ours_conv ? 0 : -1);
     cpu::set_depthwise_kernel(v == Variant::ours_portable  ? cpu::DepthwiseKernel::portable
                               : v == Variant::ours_blocked ? cpu::DepthwiseKernel::blocked_avx512
                                                            : cpu::DepthwiseKernel::automatic);
@@ -156,6 +164,7 @@ struct VariantScope {
     onednn::set_depthwise_kernel_override(-1);
     onednn::set_pointwise_gemm_override(-1);
     onednn::set_pointwise_matmul_override(-1);
+    onednn::set_pointwise_kernel_override(-1);
     cpu::set_depthwise_kernel(cpu::DepthwiseKernel::automatic);
   }
 };
@@ -299,7 +308,8 @@ void register_all() {
       const bool convolution = !depthwise && s.k > 1;
       if (convolution) variants.push_back(Variant::ours_nochunk);
       if (!depthwise && s.k == 1)
-        variants.insert(variants.end(), {Variant::ours_matmul, Variant::ours_conv});
+        variants.insert(variants.end(),
+                        {Variant::ours_sgemm, Variant::ours_matmul, Variant::ours_conv});
       if (convolution && pass != Pass::bwd_weight) variants.push_back(Variant::ours_nowcache);
       for (Variant v : variants) {
         benchmark::RegisterBenchmark(

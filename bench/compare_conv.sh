@@ -5,8 +5,9 @@
 #   shape pass ours raw ratio [variants...]
 # where ratio = ours / raw (the issue asks for >= 0.90). Extra columns, when measured: nochunk
 # (no batch chunking), nowcache (weights reordered every call), onednn (depthwise on oneDNN),
-# blocked / portable (depthwise on our channel-interleaved AVX-512 / our portable kernel), matmul
-# (pointwise shapes with every pass on oneDNN's matmul primitive, no sgemm), conv (pointwise
+# blocked / portable (depthwise on our channel-interleaved AVX-512 / our portable kernel), sgemm
+# (pointwise shapes on oneDNN's sgemm instead of our AVX-512 kernel), matmul (pointwise shapes
+# with every pass on oneDNN's matmul primitive, no sgemm), conv (pointwise
 # shapes on oneDNN's convolution with its reorders, neither matmul nor sgemm).
 #
 # usage: bench/compare_conv.sh [path/to/bench_conv] [extra benchmark flags, e.g. --benchmark_filter=dw5]
@@ -38,15 +39,16 @@ jq -r --arg reps "${REPS:-3}" '.benchmarks[]
     BEGIN { while ((getline line < order_file) > 0) if (!(line in seen)) { seen[line] = 1; order[n++] = line } }
     { g[$1 " " $2, $3] = $4 }
     END {
-      printf "%-20s %-10s %8s %8s %6s %8s %8s %8s %8s %8s %8s %8s\n", "shape", "pass", "ours", "raw", "ratio",
-             "nochunk", "nowcache", "onednn", "blocked", "portable", "matmul", "conv"
+      printf "%-20s %-10s %8s %8s %6s %8s %8s %8s %8s %8s %8s %8s %8s\n", "shape", "pass", "ours", "raw", "ratio",
+             "nochunk", "nowcache", "onednn", "blocked", "portable", "sgemm", "matmul", "conv"
       for (i = 0; i < n; i++) {
         k = order[i]; split(k, f, " ")
         ours = g[k, "ours"]; raw = g[k, "raw"]
         ratio = (ours != "" && raw > 0) ? sprintf("%.2f", ours / raw) : "-"
-        printf "%-20s %-10s %8s %8s %6s %8s %8s %8s %8s %8s %8s %8s\n", f[1], f[2], fmt(ours), fmt(raw), ratio,
+        printf "%-20s %-10s %8s %8s %6s %8s %8s %8s %8s %8s %8s %8s %8s\n", f[1], f[2], fmt(ours), fmt(raw), ratio,
                fmt(g[k, "ours_nochunk"]), fmt(g[k, "ours_nowcache"]), fmt(g[k, "ours_onednn"]),
-               fmt(g[k, "ours_blocked"]), fmt(g[k, "ours_portable"]), fmt(g[k, "ours_matmul"]),
+               fmt(g[k, "ours_blocked"]), fmt(g[k, "ours_portable"]), fmt(g[k, "ours_sgemm"]),
+               fmt(g[k, "ours_matmul"]),
                fmt(g[k, "ours_conv"])
       }
     }

@@ -26,6 +26,7 @@
 #include "kernels/cpu/depthwise_conv2d.h"
 #include "kernels/cpu/onednn_context.h"
 #include "kernels/cpu/onednn_conv_family.h"
+#include "kernels/cpu/pointwise_gemm.h"
 #include "tests/test_support.h"
 
 namespace cvd {
@@ -301,9 +302,83 @@ TEST(OnednnConv, MatchesReferenceWithBackwardDataAsForwardEverywhereOrNowhere) {
 }
 
 // The pointwise forward and backward-data passes through sgemm on every image size, and on none
-// (the default takes it from 4096 pixels up).
+// (without our AVX-512 kernel, the default takes it from 4096 pixels up).
 TEST(OnednnConv, MatchesReferenceWithPointwiseGemmEverywhereOrNowhere) {
+  struct KernelOff {
+    KernelOff() { onednn::set_pointwise_kernel_override(0); }
+    ~KernelOff() { onednn::set_pointwise_kernel_override(-1); }
+  } kernel_off;
   check_all_cases_with_switch_on_and_off(onednn::set_pointwise_gemm_override);
+}
+
+// The pointwise forward and backward-data passes on our AVX-512 kernel on every image size, and
+// on none (the default takes it from 4096 pixels up where the CPU has AVX-512F).
+TEST(OnednnConv, MatchesReferenceWithPointwiseKernelEverywhereOrNowhere) {
+  if (!cpu::pointwise_gemm_supported()) GTEST_SKIP() << "the CPU has no AVX-512F";
+  check_all_cases_with_switch_on_and_off(onednn::set_pointwise_kernel_override);
+}
+
+// cpu::pointwise_gemm against a float64 product on the edges of its blocking: rows of A split
+// into groups of 1-6, K across its 128-row blocks, pixels across its 64-pixel tiles and 512-pixel
+// strips, A read through strides (transposed), no bias, and an output large enough (>= 8 MiB) to
+// take the non-temporal stores, once 64-byte aligned and once not.
+TEST(PointwiseGemm, MatchesFloat64ProductOnBlockEdges) {
+  if (!cpu::pointwise_gemm_supported()) GTEST_SKIP() << "the CPU has no AVX-512F";
+  struct Case {
+    int64_t n, m, k, p;
+    bool transposed, bias;
+    int64_t c_offset;  // floats the output starts past a 64-byte boundary
+  };
+  const std::vector<Case> cases = {
+      {1, 1, 1, 1, false, true, 0},      {2, 7, 3, 63, false, true, 0},
+      {1, 13, 5, 65, true, false, 0},    {3, 8, 129, 511, false, true, 0},
+      {1, 64, 128, 513, true, true, 0},  {2, 11, 300, 1100, false, false, 0},
+      {1, 2, 257, 64, true, true, 0},    {2, 64, 16, 16384, false, true, 0},
+      {2, 64, 16, 16384, true, true, 3}, {1, 5, 2, 17, false, true, 1},
+  };
+  Generator gen(5);
+  for (const Case& cs : cases) {
+    SCOPED_TRACE("n " + std::to_string(cs.n) + " m " + std::to_string(cs.m) + " k " +
+                 std::to_string(cs.k) + " p " + std::to_string(cs.p) +
+                 (cs.transposed ? " A^T" : "") + " offset " + std::to_string(cs.c_offset));
+    auto random = [&](int64_t count) {
+      const Tensor t = Tensor::randn({count}, gen);
+      return std::vector<float>(t.data<float>(), t.data<float>() + count);
+    };
+    const std::vector<float> a = random(cs.m * cs.k), b = random(cs.n * cs.k * cs.p);
+    const std::vector<float> bias = random(cs.m);
+    const Tensor out = Tensor::empty({cs.n * cs.m * cs.p + 16});
+    float* c = out.data<float>() + cs.c_offset;
+    std::fill(c, c + cs.n * cs.m * cs.p, std::numeric_limits<float>::quiet_NaN());
+    cpu::PointwiseGemm g;
+    g.n = cs.n, g.m = cs.m, g.k = cs.k, g.p = cs.p;
+    g.a = a.data();  // stored [m, k], or [k, m] read as its transpose
+    g.a_row = cs.transposed ? 1 : cs.k;
+    g.a_col = cs.transposed ? cs.m : 1;
+    g.b = b.data(), g.c = c;
+    g.bias = cs.bias ? bias.data() : nullptr;
+    cpu::pointwise_gemm(g);
+    double worst = 0, scale = 1e-3;
+    std::vector<double> ref(static_cast<size_t>(cs.p));
+    for (int64_t img = 0; img < cs.n; ++img) {
+      for (int64_t r = 0; r < cs.m; ++r) {
+        std::fill(ref.begin(), ref.end(), cs.bias ? bias[r] : 0.0);
+        for (int64_t k = 0; k < cs.k; ++k) {
+          const double w = a[r * g.a_row + k * g.a_col];
+          const float* row = b.data() + (img * cs.k + k) * cs.p;
+          for (int64_t q = 0; q < cs.p; ++q) ref[q] += w * row[q];
+        }
+        const float* got = c + (img * cs.m + r) * cs.p;
+        for (int64_t q = 0; q < cs.p; ++q) {
+          scale = std::max(scale, std::abs(ref[q]));
+          const double d = std::abs(got[q] - ref[q]);
+          worst = std::isnan(d) ? std::numeric_limits<double>::infinity() : std::max(worst, d);
+        }
+      }
+    }
+    // f32 sums of k products: the rounding grows like sqrt(k).
+    EXPECT_LE(worst, 1e-5 * std::sqrt(static_cast<double>(std::max<int64_t>(cs.k, 1))) * scale);
+  }
 }
 
 TEST(OnednnConv, MatchesReferenceBatchSplitIntoChunks) {

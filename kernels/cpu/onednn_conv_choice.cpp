@@ -4,6 +4,7 @@
 
 #include "engine/compute_precision.h"
 #include "kernels/cpu/onednn_conv_family.h"
+#include "kernels/cpu/pointwise_gemm.h"
 
 #include <cstdlib>
 
@@ -17,6 +18,7 @@ std::atomic<int> g_depthwise_override{-1};
 std::atomic<int> g_pointwise_override{-1};
 std::atomic<int> g_backward_data_as_forward_override{-1};
 std::atomic<int> g_pointwise_gemm_override{-1};
+std::atomic<int> g_pointwise_kernel_override{-1};
 
 // Images of at least this many pixels take the sgemm path of use_pointwise_gemm() (64x64).
 constexpr int64_t kPointwiseGemmMinPixels = 4096;
@@ -47,6 +49,7 @@ void set_depthwise_kernel_override(int mode) { g_depthwise_override = mode; }
 void set_pointwise_matmul_override(int mode) { g_pointwise_override = mode; }
 void set_backward_data_as_forward_override(int mode) { g_backward_data_as_forward_override = mode; }
 void set_pointwise_gemm_override(int mode) { g_pointwise_gemm_override = mode; }
+void set_pointwise_kernel_override(int mode) { g_pointwise_kernel_override = mode; }
 
 void choose_conv_precision(ConvProblem& p) {
   const int64_t g = std::max<int64_t>(p.groups, 1);
@@ -89,6 +92,14 @@ bool use_pointwise_gemm(int64_t pixels, int64_t inner) {
   int forced = g_pointwise_gemm_override.load();
   if (forced < 0) forced = from_env;
   return forced < 0 ? pixels >= kPointwiseGemmMinPixels && inner >= 2 : forced == 1;
+}
+
+bool use_pointwise_kernel(int64_t pixels, int64_t inner) {
+  static const int from_env = switch_from_env("CVD_POINTWISE_KERNEL");
+  int forced = g_pointwise_kernel_override.load();
+  if (forced < 0) forced = from_env;
+  if (!cpu::pointwise_gemm_supported() || forced == 0) return false;
+  return forced == 1 || (pixels >= kPointwiseGemmMinPixels && inner >= 2);
 }
 
 bool use_depthwise_kernel(const ConvProblem& p, ConvPass /*pass*/) {

@@ -71,6 +71,12 @@ void pointwise_conv_backward_weight(const Tensor& gy, const Tensor& x, const Ten
 // small's 16x20) neither wins steadily. CVD_POINTWISE_GEMM=0 / 1 turns it off / on everywhere.
 bool use_pointwise_gemm(int64_t pixels, int64_t inner);
 
+// Whether such a pass runs on our AVX-512 kernel (cpu/pointwise_gemm.h) instead: where the CPU
+// has AVX-512F, on the images use_pointwise_gemm() sends to sgemm. 1x1_128-64_224x384 forward,
+// 2 threads, Intel Xeon: see the header of pointwise_gemm.h. CVD_POINTWISE_KERNEL=0 / 1 turns it
+// off / on everywhere (on only where the CPU has AVX-512F).
+bool use_pointwise_kernel(int64_t pixels, int64_t inner);
+
 // Backward data of a unit-stride, undilated, ungrouped convolution whose output has fewer than 16
 // channels, computed as the forward convolution of the output gradient with the weights flipped
 // and transposed ([C, O, KH, KW], pads KH-1-pad per side). oneDNN 2.6 runs such narrow backward
@@ -89,6 +95,7 @@ void set_depthwise_kernel_override(int mode);
 void set_pointwise_matmul_override(int mode);
 void set_backward_data_as_forward_override(int mode);
 void set_pointwise_gemm_override(int mode);
+void set_pointwise_kernel_override(int mode);
 
 // Sum of gy [N, C, H, W] over N, H and W into gb [C] (f64 accumulation). bf16 backward-weights
 // passes compute the bias gradient with this instead of the primitive: oneDNN 2.6's AMX kernel

@@ -1,25 +1,29 @@
-// Pointwise (1x1, stride 1, unpadded, ungrouped) convolutions as oneDNN matmul primitives on the
-// NCHW tensors themselves. With P = H * W pixels, per image n:
+// Pointwise (1x1, stride 1, unpadded, ungrouped) convolutions on the NCHW tensors themselves.
+// With P = H * W pixels, per image n:
 //   forward:          y_n [O, P] = W [O, C] x_n [C, P] + b      (W broadcast over the batch)
 //   backward data:    gx_n [C, P] = W^T [C, O] gy_n [O, P]      (W^T as strides, no copy)
 //   backward weights: gW [O, C] = sum_n gy_n [O, P] x_n^T [P, C] (batched, then summed over n)
-// Measured faster than oneDNN's blocked 1x1 convolution even before counting its reorders on
-// small images (bench/bench_conv.cpp, shape 1x1_96-576_16x20); on Mannequin's full-resolution
-// shape (1x1_128-64_224x384) oneDNN's convolution on data already in its layout is ~2x faster.
-// With the reorders every other convolution pays it beat sgemm only in the forward pass at that
-// resolution with 128 input channels (1.3-1.5x for 64 outputs, 1.0-1.1x for 16 and 32), tied in
-// backward data and lost elsewhere: 0.7x at 112x192 with 256 channels, 0.23-0.39x on the default
-// network's narrow layers (bench_conv variant ours_conv, 2026-12-06), so pointwise layers stay
-// here. On large images the forward and backward-data products run as oneDNN's sgemm, one call
-// per image (use_pointwise_gemm()); oneDNN 2.6's f32 matmul on these plain layouts runs the same
-// sgemm kernel (results bitwise equal), so that choice moves time, not results. Adding the bias
-// per cache-sized column block instead of in a separate pass gained nothing measurable (tried).
+// On images of at least 64x64 pixels (use_pointwise_gemm()) the forward and backward-data products
+// run on our AVX-512 kernel (cpu/pointwise_gemm.h) where the CPU has AVX-512F, else as oneDNN's
+// sgemm, one call per image; smaller images and backward weights run as oneDNN matmul primitives.
+// History of the choice (bench/bench_conv.cpp): the matmul primitive beat oneDNN's blocked 1x1
+// convolution even before counting its reorders on small images (1x1_96-576_16x20); on Mannequin's
+// full-resolution shape (1x1_128-64_224x384) oneDNN's convolution on data already in its layout
+// was ~2x faster than sgemm or the matmul, and with the reorders every other convolution pays it
+// still beat sgemm in the forward pass there (1.3-1.5x), tied in backward data and lost elsewhere
+// (0.7x at 112x192 with 256 channels, 0.23-0.39x on the default network's narrow layers; bench
+// variant ours_conv, 2026-12-06). oneDNN 2.6's f32 matmul on these plain layouts runs the same
+// sgemm kernel (results bitwise equal). Adding the bias per cache-sized column block instead of in
+// a separate pass gained nothing measurable for sgemm (tried). Our kernel, which adds the bias in
+// its registers, streams its output and packs the input in strips, ran that shape's forward and
+// backward data at ~2x sgemm (2026-12-07, the README's conv table).
 #include <cstring>
 #include <vector>
 
 #include "engine/error.h"
 #include "kernels/cpu/cpu_parallel.h"
 #include "kernels/cpu/onednn_conv_family.h"
+#include "kernels/cpu/pointwise_gemm.h"
 
 namespace cvd::onednn {
 
@@ -85,6 +89,15 @@ void sgemm(char transa, int64_t m, int64_t n, int64_t k, const float* a, const f
 
 void pointwise_conv_forward(const Tensor& x, const Tensor& w, const Tensor& b, const Tensor& y) {
   const int64_t n = x.size(0), c = x.size(1), o = y.size(1), p = x.size(2) * x.size(3);
+  if (use_pointwise_kernel(p, c)) {
+    cpu::PointwiseGemm g;
+    g.n = n, g.m = o, g.k = c, g.p = p;
+    g.a = w.data<float>(), g.a_row = c, g.a_col = 1;
+    g.b = x.data<float>(), g.c = y.data<float>();
+    g.bias = b.defined() ? b.data<float>() : nullptr;
+    cpu::pointwise_gemm(g);
+    return;
+  }
   if (use_pointwise_gemm(p, c)) {
     for (int64_t i = 0; i < n; ++i)
       sgemm('N', o, p, c, w.data<float>(), x.data<float>() + i * c * p,
@@ -112,6 +125,14 @@ void pointwise_conv_forward(const Tensor& x, const Tensor& w, const Tensor& b, c
 
 void pointwise_conv_backward_data(const Tensor& gy, const Tensor& w, const Tensor& gx) {
   const int64_t n = gx.size(0), c = gx.size(1), o = gy.size(1), p = gx.size(2) * gx.size(3);
+  if (use_pointwise_kernel(p, o)) {  // gx_n = W^T gy_n: A (m = c, k = o) at w[o * C + c]
+    cpu::PointwiseGemm g;
+    g.n = n, g.m = c, g.k = o, g.p = p;
+    g.a = w.data<float>(), g.a_row = 1, g.a_col = c;
+    g.b = gy.data<float>(), g.c = gx.data<float>();
+    cpu::pointwise_gemm(g);
+    return;
+  }
   if (use_pointwise_gemm(p, o)) {
     for (int64_t i = 0; i < n; ++i)  // gx_n = W^T gy_n, W stored [O, C]
       sgemm('T', c, p, o, w.data<float>(), gy.data<float>() + i * o * p,

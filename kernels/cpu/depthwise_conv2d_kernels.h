@@ -8,35 +8,11 @@
 //             zero-padded stride phases (forward and backward data only).
 #pragma once
 #include <cstdint>
-#include <cstdlib>
-#include <memory>
-#include <new>
 
+#include "kernels/cpu/aligned_float_buffer.h"
 #include "kernels/cpu/depthwise_conv2d.h"
 
 namespace cvd::cpu::depthwise {
-
-// A 64-byte aligned float buffer that grows on demand (contents not kept across growth, not
-// initialised): the AVX-512 implementations' per-thread work space.
-class AlignedFloatBuffer {
- public:
-  float* get(int64_t floats) {
-    if (floats > size_) {
-      const size_t bytes = (static_cast<size_t>(floats) * sizeof(float) + 63) / 64 * 64;
-      data_.reset(static_cast<float*>(std::aligned_alloc(64, bytes)));
-      if (!data_) throw std::bad_alloc();
-      size_ = floats;
-    }
-    return data_.get();
-  }
-
- private:
-  struct Free {
-    void operator()(float* p) const { std::free(p); }
-  };
-  std::unique_ptr<float, Free> data_;
-  int64_t size_ = 0;
-};
 
 void forward_portable(const DepthwiseGeometry& g, int64_t c0, int64_t c1, const float* x,
                       const float* w, const float* b, float* y);

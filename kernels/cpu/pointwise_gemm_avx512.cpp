@@ -13,11 +13,9 @@
 
 #include <algorithm>
 #include <cstdint>
-#include <cstdlib>
-#include <memory>
-#include <new>
 #include <vector>
 
+#include "kernels/cpu/aligned_float_buffer.h"
 #include "kernels/cpu/cpu_parallel.h"
 #include "kernels/cpu/pointwise_gemm.h"
 
@@ -144,22 +142,6 @@ CVD_AVX512 void pack_strip(const float* b, int64_t p, int64_t k0, int64_t kc, in
   }
 }
 
-// A 64-byte aligned float buffer per thread that grows on demand.
-float* thread_buffer(int64_t floats) {
-  struct Free {
-    void operator()(float* q) const { std::free(q); }
-  };
-  thread_local std::unique_ptr<float, Free> data;
-  thread_local int64_t size = 0;
-  if (floats > size) {
-    const size_t bytes = (static_cast<size_t>(floats) * sizeof(float) + 63) / 64 * 64;
-    data.reset(static_cast<float*>(std::aligned_alloc(64, bytes)));
-    if (!data) throw std::bad_alloc();
-    size = floats;
-  }
-  return data.get();
-}
-
 }  // namespace
 
 bool pointwise_gemm_supported() { return __builtin_cpu_supports("avx512f"); }
@@ -183,7 +165,8 @@ void pointwise_gemm(const PointwiseGemm& g) {
   const bool stream = g.p % kLine == 0 && reinterpret_cast<uintptr_t>(g.c) % 64 == 0 &&
                       g.n * g.m * g.p * static_cast<int64_t>(sizeof(float)) >= kStreamMinBytes;
   parallel_ranges(items, g.m * g.k * kStrip, [&](int64_t begin, int64_t end) {
-    float* strip = thread_buffer(std::min(g.k, kKBlock) * kStrip + kTile);
+    thread_local AlignedFloatBuffer strip_buffer;
+    float* strip = strip_buffer.get(std::min(g.k, kKBlock) * kStrip + kTile);
     // The steps of this range in order: (item, K block).
     for (int64_t step = begin * k_blocks; step < end * k_blocks; ++step) {
       const int64_t item = step / k_blocks, kb = step % k_blocks;

@@ -320,7 +320,7 @@ TEST(OnednnConv, MatchesReferenceWithPointwiseKernelEverywhereOrNowhere) {
 
 // cpu::pointwise_gemm against a float64 product on the edges of its blocking: rows of A split
 // into groups of 1-6, K across its 128-row blocks, pixels across its 64-pixel tiles and 512-pixel
-// strips, A read through strides (transposed), no bias, and an output large enough (>= 8 MiB) to
+// strips, A read through strides (transposed), no bias, and an output large enough (>= 4 MiB) to
 // take the non-temporal stores, once 64-byte aligned and once not.
 TEST(PointwiseGemm, MatchesFloat64ProductOnBlockEdges) {
   if (!cpu::pointwise_gemm_supported()) GTEST_SKIP() << "the CPU has no AVX-512F";

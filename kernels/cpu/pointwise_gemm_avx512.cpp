@@ -32,7 +32,7 @@ constexpr int64_t kStrip = 512;   // pixels per work item
 constexpr int64_t kKBlock = 128;  // rows of B per packed block (a 32 KB tile stays in L1)
 constexpr int kMaxRows = 6;       // rows of A per register tile (24 accumulators)
 constexpr int kLine = 16;         // floats per cache line
-constexpr int64_t kStreamMinBytes = int64_t{8} << 20;  // outputs streamed past the cache
+constexpr int64_t kStreamMinBytes = int64_t{4} << 20;  // outputs streamed past the cache
 
 // Lines [begin, end) of a block of rows (ld floats apart, lines_per_row lines each) to prefetch.
 struct Prefetch {

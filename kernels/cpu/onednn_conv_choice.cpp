@@ -27,6 +27,11 @@ constexpr int64_t kPointwiseGemmMinPixels = 4096;
 // blocks (1x1_256-64_112x192 forward) it ran at 0.58-0.97x sgemm in five runs (2026-12-07, Intel
 // Xeon, 2 threads), with one block 1.3-2.4x (1x1_128-64_224x384, both passes).
 constexpr int64_t kPointwiseKernelMaxInner = 128;
+// ... and at least this many: on the default network's narrow layers (8-32 channels) the kernel
+// was within the spread of sgemm per shape (16 -> 8 at 192x256: 1.0-1.1x) and in `cvd run`
+// (frames 0-149 every 3rd, 4 epochs, on / off alternated twice: 134 / 122 s, 119 / 132 s), so
+// those layers keep sgemm and the default pipeline's results stay bitwise as before.
+constexpr int64_t kPointwiseKernelMinInner = 64;
 
 // An environment switch "0" / "1" as 0 / 1; -1 when unset or anything else.
 int switch_from_env(const char* name) {
@@ -104,8 +109,8 @@ bool use_pointwise_kernel(int64_t pixels, int64_t inner) {
   int forced = g_pointwise_kernel_override.load();
   if (forced < 0) forced = from_env;
   if (!cpu::pointwise_gemm_supported() || forced == 0) return false;
-  return forced == 1 ||
-         (pixels >= kPointwiseGemmMinPixels && inner >= 2 && inner <= kPointwiseKernelMaxInner);
+  return forced == 1 || (pixels >= kPointwiseGemmMinPixels && inner >= kPointwiseKernelMinInner &&
+                         inner <= kPointwiseKernelMaxInner);
 }
 
 bool use_depthwise_kernel(const ConvProblem& p, ConvPass /*pass*/) {

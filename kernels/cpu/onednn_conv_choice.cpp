@@ -32,6 +32,11 @@ constexpr int64_t kPointwiseKernelMaxInner = 128;
 // (frames 0-149 every 3rd, 4 epochs, on / off alternated twice: 134 / 122 s, 119 / 132 s), so
 // those layers keep sgemm and the default pipeline's results stay bitwise as before.
 constexpr int64_t kPointwiseKernelMinInner = 64;
+// ... on images of at least this many pixels (128x128). MiDaS v2's bottleneck layers at 96x56
+// (5,376 pixels, 64-256 channels) ran slower on the kernel than on sgemm: inference 4.18 / 4.04,
+// 4.87 / 4.07, 4.10 / 3.83 s kernel on / off (bench_models --arch midas_v2 --mode infer --batch 8,
+// 2026-12-07, Intel Xeon, 2 threads); it gains on 112x192 (21,504) and 224x384 (86,016).
+constexpr int64_t kPointwiseKernelMinPixels = 16384;
 
 // An environment switch "0" / "1" as 0 / 1; -1 when unset or anything else.
 int switch_from_env(const char* name) {
@@ -109,7 +114,7 @@ bool use_pointwise_kernel(int64_t pixels, int64_t inner) {
   int forced = g_pointwise_kernel_override.load();
   if (forced < 0) forced = from_env;
   if (!cpu::pointwise_gemm_supported() || forced == 0) return false;
-  return forced == 1 || (pixels >= kPointwiseGemmMinPixels && inner >= kPointwiseKernelMinInner &&
+  return forced == 1 || (pixels >= kPointwiseKernelMinPixels && inner >= kPointwiseKernelMinInner &&
                          inner <= kPointwiseKernelMaxInner);
 }
 

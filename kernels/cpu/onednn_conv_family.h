@@ -72,9 +72,9 @@ void pointwise_conv_backward_weight(const Tensor& gy, const Tensor& x, const Ten
 bool use_pointwise_gemm(int64_t pixels, int64_t inner);
 
 // Whether such a pass runs on our AVX-512 kernel (cpu/pointwise_gemm.h) instead: where the CPU
-// has AVX-512F, on the images use_pointwise_gemm() sends to sgemm, summing over 64 to 128
-// channels (outside that range sgemm was as fast or faster, or the gain was not resolvable;
-// figures in the README's conv table). CVD_POINTWISE_KERNEL=0 / 1 turns it off / on everywhere (on only where the CPU has
+// has AVX-512F, on images of at least 128x128 pixels, summing over 64 to 128 channels (outside
+// that range sgemm was as fast or faster, or the gain was not resolvable; figures in the README's
+// conv table). CVD_POINTWISE_KERNEL=0 / 1 turns it off / on everywhere (on only where the CPU has
 // AVX-512F).
 bool use_pointwise_kernel(int64_t pixels, int64_t inner);
 

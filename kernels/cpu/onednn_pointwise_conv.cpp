@@ -4,8 +4,9 @@
 //   backward data:    gx_n [C, P] = W^T [C, O] gy_n [O, P]      (W^T as strides, no copy)
 //   backward weights: gW [O, C] = sum_n gy_n [O, P] x_n^T [P, C] (batched, then summed over n)
 // On images of at least 64x64 pixels (use_pointwise_gemm()) the forward and backward-data products
-// run on our AVX-512 kernel (cpu/pointwise_gemm.h) where the CPU has AVX-512F, else as oneDNN's
-// sgemm, one call per image; smaller images and backward weights run as oneDNN matmul primitives.
+// run as oneDNN's sgemm, one call per image, or on our AVX-512 kernel (cpu/pointwise_gemm.h) where
+// use_pointwise_kernel() says so (AVX-512F, 128x128 pixels or more, sums over 64-128 channels);
+// smaller images and backward weights run as oneDNN matmul primitives.
 // History of the choice (bench/bench_conv.cpp): the matmul primitive beat oneDNN's blocked 1x1
 // convolution even before counting its reorders on small images (1x1_96-576_16x20); on Mannequin's
 // full-resolution shape (1x1_128-64_224x384) oneDNN's convolution on data already in its layout

@@ -312,7 +312,8 @@ TEST(OnednnConv, MatchesReferenceWithPointwiseGemmEverywhereOrNowhere) {
 }
 
 // The pointwise forward and backward-data passes on our AVX-512 kernel on every image size, and
-// on none (the default takes it from 4096 pixels up where the CPU has AVX-512F).
+// on none (the default takes it where the CPU has AVX-512F, on images of 128x128 pixels or more
+// summing over 64-128 channels).
 TEST(OnednnConv, MatchesReferenceWithPointwiseKernelEverywhereOrNowhere) {
   if (!cpu::pointwise_gemm_supported()) GTEST_SKIP() << "the CPU has no AVX-512F";
   check_all_cases_with_switch_on_and_off(onednn::set_pointwise_kernel_override);

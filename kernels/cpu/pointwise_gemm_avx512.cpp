@@ -106,6 +106,11 @@ constexpr TileFn kTileFns[kMaxRows + 1] = {nullptr,          multiply_tile<1>, m
                                            multiply_tile<3>, multiply_tile<4>, multiply_tile<5>,
                                            multiply_tile<6>};
 
+// One step of a thread's work: image img, pixels [p0, p0 + width), rows [k0, k0 + kc) of B.
+struct StripStep {
+  int64_t img = 0, p0 = 0, width = 0, k0 = 0, kc = 0;
+};
+
 // Rows [first, first + rows) of A, packed [K][rows] at offset `packed` of the packed A.
 struct RowGroup {
   int64_t first = 0, rows = 0, packed = 0;
@@ -164,47 +169,48 @@ void pointwise_gemm(const PointwiseGemm& g) {
   // output is not read back before it leaves the cache, so the stores skip reading it in first.
   const bool stream = g.p % kLine == 0 && reinterpret_cast<uintptr_t>(g.c) % 64 == 0 &&
                       g.n * g.m * g.p * static_cast<int64_t>(sizeof(float)) >= kStreamMinBytes;
+  // Step s of the whole product: image, pixels [p0, p0 + width), rows [k0, k0 + kc) of B.
+  auto locate = [&](int64_t s) {
+    const int64_t item = s / k_blocks, k0 = (s % k_blocks) * kKBlock;
+    const int64_t p0 = (item % strips) * kStrip;
+    return StripStep{item / strips, p0, std::min(kStrip, g.p - p0), k0,
+                     std::min(kKBlock, g.k - k0)};
+  };
   parallel_ranges(items, g.m * g.k * kStrip, [&](int64_t begin, int64_t end) {
     thread_local AlignedFloatBuffer strip_buffer;
     float* strip = strip_buffer.get(std::min(g.k, kKBlock) * kStrip + kTile);
     // The steps of this range in order: (item, K block).
     for (int64_t step = begin * k_blocks; step < end * k_blocks; ++step) {
-      const int64_t item = step / k_blocks, kb = step % k_blocks;
-      const int64_t img = item / strips, p0 = (item % strips) * kStrip;
-      const int64_t width = std::min(kStrip, g.p - p0), tiles = (width + kTile - 1) / kTile;
-      const int64_t k0 = kb * kKBlock, kc = std::min(kKBlock, g.k - k0);
-      const float* b = g.b + img * g.k * g.p;
-      pack_strip(b, g.p, k0, kc, p0, width, strip);
+      const StripStep st = locate(step);
+      const int64_t tiles = (st.width + kTile - 1) / kTile;
+      pack_strip(g.b + st.img * g.k * g.p, g.p, st.k0, st.kc, st.p0, st.width, strip);
 
       // The rows of the next step, prefetched while this one is multiplied.
       Prefetch pf;
       int64_t lines = 0;
       if (step + 1 < end * k_blocks) {
-        const int64_t item2 = (step + 1) / k_blocks, kb2 = (step + 1) % k_blocks;
-        const int64_t img2 = item2 / strips, p02 = (item2 % strips) * kStrip;
-        const int64_t k02 = kb2 * kKBlock, kc2 = std::min(kKBlock, g.k - k02);
-        const int64_t width2 = std::min(kStrip, g.p - p02);
-        pf.base = g.b + (img2 * g.k + k02) * g.p + p02;
+        const StripStep next = locate(step + 1);
+        pf.base = g.b + (next.img * g.k + next.k0) * g.p + next.p0;
         pf.ld = g.p;
-        pf.lines_per_row = (width2 + kLine - 1) / kLine;
-        lines = kc2 * pf.lines_per_row;
+        pf.lines_per_row = (next.width + kLine - 1) / kLine;
+        lines = next.kc * pf.lines_per_row;
       }
       const int64_t calls = tiles * static_cast<int64_t>(groups.size());
       const int64_t per_call = (lines + calls - 1) / calls;
       int64_t call = 0;
 
-      float* c = g.c + img * g.m * g.p + p0;
+      float* c = g.c + st.img * g.m * g.p + st.p0;
       for (int64_t t = 0; t < tiles; ++t) {
-        const int valid = static_cast<int>(std::min<int64_t>(kTile, width - t * kTile));
+        const int valid = static_cast<int>(std::min<int64_t>(kTile, st.width - t * kTile));
         for (const RowGroup& rg : groups) {
           Prefetch part = pf;
           part.begin = std::min(lines, call * per_call);
           part.end = std::min(lines, (call + 1) * per_call);
           ++call;
-          kTileFns[rg.rows](packed_a.data() + rg.packed + k0 * rg.rows, strip + t * kc * kTile, kc,
-                            g.bias != nullptr ? g.bias + rg.first : nullptr, kb > 0,
-                            stream && kb + 1 == k_blocks, c + rg.first * g.p + t * kTile, g.p,
-                            valid, part);
+          kTileFns[rg.rows](
+              packed_a.data() + rg.packed + st.k0 * rg.rows, strip + t * st.kc * kTile, st.kc,
+              g.bias != nullptr ? g.bias + rg.first : nullptr, st.k0 > 0,
+              stream && st.k0 + st.kc == g.k, c + rg.first * g.p + t * kTile, g.p, valid, part);
         }
       }
     }

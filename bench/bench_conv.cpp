@@ -72,11 +72,16 @@ const std::vector<ConvShape>& shapes() {
       {"dw5x5_576_16x20_s1", 8, 576, 16, 20, 576, 5, params(1, 2, 2, 576)},
       {"dw5x5_576_16x20_s2", 8, 576, 16, 20, 576, 5, params(2, 1, 2, 576)},
       {"1x1_96-576_16x20", 8, 96, 16, 20, 576, 1, params(1, 0, 0)},
-      // Mannequin's full-resolution inception 1x1 layers (sgemm for forward and backward data).
+      // Mannequin's full-resolution inception 1x1 layers (our AVX-512 kernel where there is one).
       {"1x1_128-64_224x384", 8, 128, 224, 384, 64, 1, params(1, 0, 0)},
-      // Mannequin's half-resolution inception 1x1 layers, and the default (width 1/8) network's
-      // full-resolution ones at `cvd run`'s 256 px and 4 pairs a step.
+      // A sum over 256 channels (two of our kernel's K blocks) at Mannequin's half resolution.
       {"1x1_256-64_112x192", 8, 256, 112, 192, 64, 1, params(1, 0, 0)},
+      // Mannequin's narrow inception branches, whose backward data sums over 32 / 16 channels
+      // into 128 (17 layers of 128 -> 32 at half resolution; 128 -> 16 once there, once at full).
+      {"1x1_128-32_112x192", 8, 128, 112, 192, 32, 1, params(1, 0, 0)},
+      {"1x1_128-16_224x384", 8, 128, 224, 384, 16, 1, params(1, 0, 0)},
+      // The default (width 1/8) network's full-resolution layers at `cvd run`'s 256 px and 4
+      // pairs a step.
       {"1x1_16-8_192x256", 4, 16, 192, 256, 8, 1, params(1, 0, 0)},
       // The default (width 1/8) Mannequin's narrow full-resolution layers, at `cvd run`'s 256 px
       // and 4 pairs a step; 2 -> 8 is the forward problem 8 -> 2's backward data equals (weights

@@ -313,10 +313,32 @@ TEST(OnednnConv, MatchesReferenceWithPointwiseGemmEverywhereOrNowhere) {
 
 // The pointwise forward and backward-data passes on our AVX-512 kernel on every image size, and
 // on none (the default takes it where the CPU has AVX-512F, on images of 128x128 pixels or more
-// summing over 64-128 channels).
+// summing over 64-128 channels, or over 16-63 into 64 or more).
 TEST(OnednnConv, MatchesReferenceWithPointwiseKernelEverywhereOrNowhere) {
   if (!cpu::pointwise_gemm_supported()) GTEST_SKIP() << "the CPU has no AVX-512F";
   check_all_cases_with_switch_on_and_off(onednn::set_pointwise_kernel_override);
+}
+
+// The default choice of the pointwise kernel by shape (pixels, channels summed over, result rows).
+TEST(OnednnConv, PointwiseKernelTakesWideProductsOnLargeImages) {
+  if (!cpu::pointwise_gemm_supported()) GTEST_SKIP() << "the CPU has no AVX-512F";
+  const int64_t full = 224 * 384, half = 112 * 192;
+  EXPECT_TRUE(onednn::use_pointwise_kernel(full, 128, 64));      // Mannequin 128 -> 64 forward
+  EXPECT_TRUE(onednn::use_pointwise_kernel(full, 64, 128));      // ... and its backward data
+  EXPECT_TRUE(onednn::use_pointwise_kernel(half, 32, 128));      // 128 -> 32 backward data
+  EXPECT_TRUE(onednn::use_pointwise_kernel(full, 16, 128));      // 128 -> 16 backward data
+  EXPECT_FALSE(onednn::use_pointwise_kernel(half, 256, 64));     // two K blocks: sgemm
+  EXPECT_FALSE(onednn::use_pointwise_kernel(half, 8, 128));      // too narrow a sum
+  EXPECT_FALSE(onednn::use_pointwise_kernel(96 * 56, 64, 256));  // MiDaS v2's small images
+  // The default (width 1/8) network's layers keep sgemm: at most 32 channels either way.
+  EXPECT_FALSE(onednn::use_pointwise_kernel(192 * 256, 16, 8));
+  EXPECT_FALSE(onednn::use_pointwise_kernel(192 * 256, 8, 16));
+  EXPECT_FALSE(onednn::use_pointwise_kernel(192 * 256, 32, 32));
+  onednn::set_pointwise_kernel_override(0);
+  EXPECT_FALSE(onednn::use_pointwise_kernel(full, 128, 64));
+  onednn::set_pointwise_kernel_override(1);
+  EXPECT_TRUE(onednn::use_pointwise_kernel(192 * 256, 8, 16));
+  onednn::set_pointwise_kernel_override(-1);
 }
 
 // cpu::pointwise_gemm against a float64 product on the edges of its blocking: rows of A split

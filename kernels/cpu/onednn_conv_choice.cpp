@@ -32,6 +32,13 @@ constexpr int64_t kPointwiseKernelMaxInner = 128;
 // (frames 0-149 every 3rd, 4 epochs, on / off alternated twice: 134 / 122 s, 119 / 132 s), so
 // those layers keep sgemm and the default pipeline's results stay bitwise as before.
 constexpr int64_t kPointwiseKernelMinInner = 64;
+// ... or at least this many where the product has at least kPointwiseKernelWideRows rows of
+// output: the backward data of Mannequin's 128 -> 32 and 128 -> 16 layers (sums over 32 / 16
+// channels into 128) ran on the kernel at 1.5x and 1.9x sgemm (1x1_128-32_112x192: 412 against
+// 273 GFLOP/s; 1x1_128-16_224x384: 316 against 169; 2026-12-07, AMD EPYC Zen 5, 2 threads). The
+// default network's layers have at most 32 output channels, so they keep sgemm.
+constexpr int64_t kPointwiseKernelMinNarrowInner = 16;
+constexpr int64_t kPointwiseKernelWideRows = 64;
 // ... on images of at least this many pixels (128x128). MiDaS v2's bottleneck layers at 96x56
 // (5,376 pixels, 64-256 channels) ran slower on the kernel than on sgemm: inference 4.18 / 4.04,
 // 4.87 / 4.07, 4.10 / 3.83 s kernel on / off (bench_models --arch midas_v2 --mode infer --batch 8,
@@ -109,13 +116,15 @@ bool use_pointwise_gemm(int64_t pixels, int64_t inner) {
   return forced < 0 ? pixels >= kPointwiseGemmMinPixels && inner >= 2 : forced == 1;
 }
 
-bool use_pointwise_kernel(int64_t pixels, int64_t inner) {
+bool use_pointwise_kernel(int64_t pixels, int64_t inner, int64_t rows) {
   static const int from_env = switch_from_env("CVD_POINTWISE_KERNEL");
   int forced = g_pointwise_kernel_override.load();
   if (forced < 0) forced = from_env;
   if (!cpu::pointwise_gemm_supported() || forced == 0) return false;
-  return forced == 1 || (pixels >= kPointwiseKernelMinPixels && inner >= kPointwiseKernelMinInner &&
-                         inner <= kPointwiseKernelMaxInner);
+  if (forced == 1) return true;
+  const bool wide = inner >= kPointwiseKernelMinInner ||
+                    (inner >= kPointwiseKernelMinNarrowInner && rows >= kPointwiseKernelWideRows);
+  return pixels >= kPointwiseKernelMinPixels && inner <= kPointwiseKernelMaxInner && wide;
 }
 
 bool use_depthwise_kernel(const ConvProblem& p, ConvPass /*pass*/) {

@@ -72,11 +72,12 @@ void pointwise_conv_backward_weight(const Tensor& gy, const Tensor& x, const Ten
 bool use_pointwise_gemm(int64_t pixels, int64_t inner);
 
 // Whether such a pass runs on our AVX-512 kernel (cpu/pointwise_gemm.h) instead: where the CPU
-// has AVX-512F, on images of at least 128x128 pixels, summing over 64 to 128 channels (outside
-// that range sgemm was as fast or faster, or the gain was not resolvable; figures in the README's
-// conv table). CVD_POINTWISE_KERNEL=0 / 1 turns it off / on everywhere (on only where the CPU has
-// AVX-512F).
-bool use_pointwise_kernel(int64_t pixels, int64_t inner);
+// has AVX-512F, on images of at least 128x128 pixels, summing over 64 to 128 channels, or over
+// 16 to 63 into at least 64 output `rows` (channels of the result: the output's for forward, the
+// input's for backward data). Outside that range sgemm was as fast or faster, or the gain was not
+// resolvable (figures in the README's conv table). CVD_POINTWISE_KERNEL=0 / 1 turns it off / on
+// everywhere (on only where the CPU has AVX-512F).
+bool use_pointwise_kernel(int64_t pixels, int64_t inner, int64_t rows);
 
 // Backward data of a unit-stride, undilated, ungrouped convolution whose output has fewer than 16
 // channels, computed as the forward convolution of the output gradient with the weights flipped

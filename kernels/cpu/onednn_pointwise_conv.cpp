@@ -5,7 +5,8 @@
 //   backward weights: gW [O, C] = sum_n gy_n [O, P] x_n^T [P, C] (batched, then summed over n)
 // On images of at least 64x64 pixels (use_pointwise_gemm()) the forward and backward-data products
 // run as oneDNN's sgemm, one call per image, or on our AVX-512 kernel (cpu/pointwise_gemm.h) where
-// use_pointwise_kernel() says so (AVX-512F, 128x128 pixels or more, sums over 64-128 channels);
+// use_pointwise_kernel() says so (AVX-512F, 128x128 pixels or more, sums over 64-128 channels or
+// over 16-63 into 64 or more);
 // smaller images and backward weights run as oneDNN matmul primitives.
 // History of the choice (bench/bench_conv.cpp): the matmul primitive beat oneDNN's blocked 1x1
 // convolution even before counting its reorders on small images (1x1_96-576_16x20); on Mannequin's
@@ -90,7 +91,7 @@ void sgemm(char transa, int64_t m, int64_t n, int64_t k, const float* a, const f
 
 void pointwise_conv_forward(const Tensor& x, const Tensor& w, const Tensor& b, const Tensor& y) {
   const int64_t n = x.size(0), c = x.size(1), o = y.size(1), p = x.size(2) * x.size(3);
-  if (use_pointwise_kernel(p, c)) {
+  if (use_pointwise_kernel(p, c, o)) {
     cpu::PointwiseGemm g;
     g.n = n, g.m = o, g.k = c, g.p = p;
     g.a = w.data<float>(), g.a_row = c, g.a_col = 1;
@@ -126,7 +127,7 @@ void pointwise_conv_forward(const Tensor& x, const Tensor& w, const Tensor& b, c
 
 void pointwise_conv_backward_data(const Tensor& gy, const Tensor& w, const Tensor& gx) {
   const int64_t n = gx.size(0), c = gx.size(1), o = gy.size(1), p = gx.size(2) * gx.size(3);
-  if (use_pointwise_kernel(p, o)) {  // gx_n = W^T gy_n: A (m = c, k = o) at w[o * C + c]
+  if (use_pointwise_kernel(p, o, c)) {  // gx_n = W^T gy_n: A (m = c, k = o) at w[o * C + c]
     cpu::PointwiseGemm g;
     g.n = n, g.m = c, g.k = o, g.p = p;
     g.a = w.data<float>(), g.a_row = 1, g.a_col = c;

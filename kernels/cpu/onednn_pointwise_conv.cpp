@@ -6,8 +6,7 @@
 // On images of at least 64x64 pixels (use_pointwise_gemm()) the forward and backward-data products
 // run as oneDNN's sgemm, one call per image, or on our AVX-512 kernel (cpu/pointwise_gemm.h) where
 // use_pointwise_kernel() says so (AVX-512F, 128x128 pixels or more, sums over 64-128 channels or
-// over 16-63 into 64 or more);
-// smaller images and backward weights run as oneDNN matmul primitives.
+// over 16-63 into 64 or more); smaller images and backward weights run as oneDNN matmul primitives.
 // History of the choice (bench/bench_conv.cpp): the matmul primitive beat oneDNN's blocked 1x1
 // convolution even before counting its reorders on small images (1x1_96-576_16x20); on Mannequin's
 // full-resolution shape (1x1_128-64_224x384) oneDNN's convolution on data already in its layout

@@ -66,6 +66,64 @@ TEST_F(HostBlockCache, NeverHoldsMoreThanThePeakOfLiveBytes) {
   EXPECT_EQ(host_block_cache_stats().cached_bytes, 0u);
 }
 
+// Every byte of [p, p + n) equals v.
+bool filled_with(const void* p, size_t n, unsigned char v) {
+  const auto* c = static_cast<const unsigned char*>(p);
+  for (size_t i = 0; i < n; ++i)
+    if (c[i] != v) return false;
+  return true;
+}
+
+TEST_F(HostBlockCache, MissPastThePeakMovesThePagesOfCachedBlocks) {
+  if (!host_block_huge_pages_enabled())
+    GTEST_SKIP() << "huge-page blocks are off (CVD_HUGE_PAGES=0): nothing to move by mremap";
+  // Two 8 MiB blocks live at once set the high-water mark at 16 MiB; once cached, a 16 MiB request
+  // cannot be served by either, and a fresh block would hold 32 MiB: their pages are moved into
+  // it instead. Fresh pages would read zero; moved ones keep what was written.
+  auto* a = static_cast<unsigned char*>(host_block_allocate(8 * MiB));
+  auto* b = static_cast<unsigned char*>(host_block_allocate(8 * MiB));
+  std::memset(a, 0x11, 8 * MiB);
+  std::memset(b, 0x22, 8 * MiB);
+  host_block_free(a, 8 * MiB);
+  host_block_free(b, 8 * MiB);
+  const auto before = host_block_cache_stats();
+  auto* c = static_cast<unsigned char*>(host_block_allocate(16 * MiB));
+  auto s = host_block_cache_stats();
+  EXPECT_EQ(s.remapped_bytes - before.remapped_bytes, 16 * MiB);
+  EXPECT_EQ(s.cached_bytes, 0u);
+  EXPECT_LE(s.live_bytes + s.cached_bytes, s.peak_live_bytes);
+  const unsigned char first = c[0], second = c[8 * MiB];
+  EXPECT_TRUE((first == 0x11 && second == 0x22) || (first == 0x22 && second == 0x11));
+  EXPECT_TRUE(filled_with(c, 8 * MiB, first));
+  EXPECT_TRUE(filled_with(c + 8 * MiB, 8 * MiB, second));
+
+  // A smaller request takes the first 6 MiB of it; the other 10 MiB stay cached in place, the
+  // boundary between its two source mappings now 2 MiB into them, and serve the next request.
+  std::memset(c, 0x33, 16 * MiB);
+  host_block_free(c, 16 * MiB);
+  auto* d = static_cast<unsigned char*>(host_block_allocate(6 * MiB));
+  EXPECT_NE(d, c);
+  EXPECT_TRUE(filled_with(d, 6 * MiB, 0x33));
+  EXPECT_EQ(host_block_cache_stats().cached_bytes, 10 * MiB);
+  auto* e = static_cast<unsigned char*>(host_block_allocate(10 * MiB));
+  EXPECT_EQ(e, c + 6 * MiB);
+
+  // Both cached again, a 16 MiB request is stitched from three mappings: e's two, then d's.
+  std::memset(d, 0x44, 6 * MiB);
+  std::memset(e, 0x55, 10 * MiB);
+  host_block_free(d, 6 * MiB);
+  host_block_free(e, 10 * MiB);
+  const auto before_f = host_block_cache_stats();
+  auto* f = static_cast<unsigned char*>(host_block_allocate(16 * MiB));
+  s = host_block_cache_stats();
+  EXPECT_EQ(s.remapped_bytes - before_f.remapped_bytes, 16 * MiB);
+  EXPECT_GE(s.remaps - before_f.remaps, 3u);
+  EXPECT_TRUE(filled_with(f, 10 * MiB, 0x55));
+  EXPECT_TRUE(filled_with(f + 10 * MiB, 6 * MiB, 0x44));
+  std::memset(f, 0x66, 16 * MiB);  // every page of it is writable
+  host_block_free(f, 16 * MiB);
+}
+
 TEST_F(HostBlockCache, LargeBlocksAreAlignedAndUsable) {
   for (size_t bytes : {1 * MiB + 4, 2 * MiB, 3 * MiB + 12345, 9 * MiB}) {
     auto* p = static_cast<unsigned char*>(host_block_allocate(bytes));

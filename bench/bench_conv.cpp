@@ -88,6 +88,13 @@ const std::vector<ConvShape>& shapes() {
       // flipped and transposed).
       {"11x11_8-2_192x256", 4, 8, 192, 256, 2, 11, params(1, 5, 5)},
       {"11x11_2-8_192x256", 4, 2, 192, 256, 8, 11, params(1, 5, 5)},
+      // The default network's narrowest inception branches at `cvd demo`'s 192x112 and 4 pairs a
+      // step (full resolution) and at half resolution: oneDNN vectorises over their 2-4 output
+      // channels; cpu/narrow_conv2d.h runs them by default (CVD_NARROW_CONV_KERNEL=0: oneDNN).
+      {"11x11_8-2_112x192", 8, 8, 112, 192, 2, 11, params(1, 5, 5)},
+      {"7x7_8-2_112x192", 8, 8, 112, 192, 2, 7, params(1, 3, 3)},
+      {"7x7_4-4_56x96", 8, 4, 56, 96, 4, 7, params(1, 3, 3)},
+      {"11x11_8-4_56x96", 8, 8, 56, 96, 4, 11, params(1, 5, 5)},
   };
   return s;
 }

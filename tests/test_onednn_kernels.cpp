@@ -24,6 +24,7 @@
 #include "engine/random.h"
 #include "engine/tensor.h"
 #include "kernels/cpu/depthwise_conv2d.h"
+#include "kernels/cpu/narrow_conv2d.h"
 #include "kernels/cpu/onednn_context.h"
 #include "kernels/cpu/onednn_conv_family.h"
 #include "kernels/cpu/pointwise_gemm.h"
@@ -201,6 +202,16 @@ const std::vector<ConvCase>& conv_cases() {
       {"narrow s2 (not eligible)", 2, 3, 11, 10, 8, 3, 3, conv_params(2, 1, 1, 1, 1), true},
       {"narrow dilation 2 (not eligible)", 1, 4, 9, 9, 2, 3, 3, conv_params(1, 2, 2, 2, 2, 2),
        false},
+      // The few-output-channel kernel (cpu/narrow_conv2d.h): rows of one, two and a half tiles
+      // of 64 pixels, every output-channel count, filter rows split into chunks of columns in
+      // backward weights (11 and 13 taps), images smaller than the filter.
+      {"narrow 3->2 5x5 rows of 70", 2, 3, 5, 70, 2, 5, 5, conv_params(1, 2, 2, 2, 2), true},
+      {"narrow 5->1 3x3 rows of 33", 1, 5, 6, 33, 1, 3, 3, conv_params(1, 1, 1, 1, 1), false},
+      {"narrow 6->3 11x11 rows of 150", 1, 6, 4, 150, 3, 11, 11, conv_params(1, 5, 5, 5, 5), true},
+      {"narrow 8->4 11x11 rows of 50", 2, 8, 7, 50, 4, 11, 11, conv_params(1, 5, 5, 5, 5), true},
+      {"narrow 2->1 13x13 p6", 1, 2, 9, 20, 1, 13, 13, conv_params(1, 6, 6, 6, 6), true},
+      {"narrow 2->3 7x7 image smaller than kernel", 2, 2, 3, 4, 3, 7, 7, conv_params(1, 3, 3, 3, 3),
+       true},
   };
   return cases;
 }
@@ -293,6 +304,39 @@ void check_all_cases_with_switch_on_and_off(void (*set_switch)(int)) {
     set_switch(mode);
     for (const ConvCase& cc : conv_cases()) check_conv_case(cc);
   }
+}
+
+TEST(OnednnConv, MatchesReferenceWithNarrowConvKernelEverywhereOrNowhere) {
+  if (!cpu::narrow_conv2d_supported()) GTEST_SKIP() << "the CPU has no AVX-512F";
+  check_all_cases_with_switch_on_and_off(onednn::set_narrow_conv_kernel_override);
+}
+
+// The few-output-channel kernel takes the default network's narrow layers and nothing it was not
+// written for.
+TEST(OnednnConv, NarrowConvKernelTakesFewOutputChannelsAtUnitStride) {
+  if (!cpu::narrow_conv2d_supported()) GTEST_SKIP() << "the CPU has no AVX-512F";
+  auto problem = [](int64_t c, int64_t o, int64_t k, int stride, int dilation, int groups) {
+    onednn::ConvProblem p;
+    p.src = {8, c, 112, 192};
+    p.dst = {8, o, 112 / stride, 192 / stride};
+    p.weights = {o, c / groups, k, k};
+    p.strides = {stride, stride};
+    p.dilates = {dilation - 1, dilation - 1};
+    p.pad_l = p.pad_r = {k / 2, k / 2};
+    p.groups = groups;
+    return p;
+  };
+  EXPECT_TRUE(onednn::use_narrow_conv_kernel(problem(8, 2, 11, 1, 1, 1)));
+  EXPECT_TRUE(onednn::use_narrow_conv_kernel(problem(8, 4, 7, 1, 1, 1)));
+  EXPECT_TRUE(onednn::use_narrow_conv_kernel(problem(8, 1, 3, 1, 1, 1)));
+  EXPECT_FALSE(onednn::use_narrow_conv_kernel(problem(8, 5, 3, 1, 1, 1)));  // 5 outputs
+  EXPECT_FALSE(onednn::use_narrow_conv_kernel(problem(8, 2, 1, 1, 1, 1)));  // 1x1
+  EXPECT_FALSE(onednn::use_narrow_conv_kernel(problem(8, 2, 3, 2, 1, 1)));  // stride 2
+  EXPECT_FALSE(onednn::use_narrow_conv_kernel(problem(8, 2, 3, 1, 2, 1)));  // dilation 2
+  EXPECT_FALSE(onednn::use_narrow_conv_kernel(problem(8, 4, 3, 1, 1, 2)));  // two groups
+  onednn::ConvProblem bf16 = problem(8, 2, 11, 1, 1, 1);
+  bf16.bf16 = true;
+  EXPECT_FALSE(onednn::use_narrow_conv_kernel(bf16));
 }
 
 // Backward data as a forward convolution: on every eligible case, wide outputs included, and on

@@ -8,6 +8,7 @@
 #include "engine/kernel_params.h"
 #include "kernels/cpu/cpu_parallel.h"
 #include "kernels/cpu/depthwise_conv2d.h"
+#include "kernels/cpu/narrow_conv2d.h"
 #include "kernels/cpu/onednn_context.h"
 #include "kernels/cpu/onednn_conv_family.h"
 #include "kernels/cpu/onednn_kernels.h"
@@ -52,6 +53,15 @@ cpu::DepthwiseGeometry depthwise_geometry(const Shape& x, const Shape& w, const 
   return g;
 }
 
+// The few-output-channel kernel's view of x [N, C, H, W] -> y [N, O, OH, OW], w [O, C, KH, KW].
+cpu::NarrowConvGeometry narrow_geometry(const Shape& x, const Shape& w, const Shape& y,
+                                        const Conv2dParams& p) {
+  cpu::NarrowConvGeometry g;
+  g.n = x[0], g.c = x[1], g.h = x[2], g.w = x[3], g.o = y[1], g.oh = y[2], g.ow = y[3];
+  g.kh = w[2], g.kw = w[3], g.pad_top = p.pad_top, g.pad_left = p.pad_left;
+  return g;
+}
+
 // w [O, C, KH, KW] -> [C, O, KH, KW], each filter turned by 180 degrees.
 Tensor flipped_transposed_weights(const Tensor& w) {
   const Shape& s = w.shape();
@@ -66,10 +76,6 @@ Tensor flipped_transposed_weights(const Tensor& w) {
           dst[((c * O + o) * KH + (KH - 1 - y)) * KW + (KW - 1 - x)] =
               src[((o * C + c) * KH + y) * KW + x];
   return f;
-}
-
-void zero_fill(const Tensor& t) {
-  if (t.defined() && t.numel() > 0) std::memset(t.data_ptr(), 0, t.nbytes());
 }
 
 // in {x, w, b?}, out {y}; Conv2dParams.
@@ -89,6 +95,12 @@ void conv2d(const KernelArgs& a) {
   }
   if (use_pointwise_matmul(pr)) {
     pointwise_conv_forward(x, w, b, y);
+    return;
+  }
+  if (use_narrow_conv_kernel(pr)) {
+    cpu::narrow_conv2d_forward(
+        narrow_geometry(x.shape(), w.shape(), y.shape(), a.p<Conv2dParams>()), x.data<float>(),
+        w.data<float>(), b.defined() ? b.data<float>() : nullptr, y.data<float>());
     return;
   }
   ChunkedPrimitive& plan = conv_pass_plan<ConvolutionFamily>(pr, ConvPass::forward);
@@ -127,6 +139,11 @@ void conv2d_backward_data(const KernelArgs& a) {
     fp.pad_left = kw - 1 - fp.pad_left;
     fp.pad_right = kw - 1 - fp.pad_right;
     const ConvProblem fpr = conv_problem(gy.shape(), wf.shape(), gx.shape(), fp, false);
+    if (use_narrow_conv_kernel(fpr)) {
+      cpu::narrow_conv2d_forward(narrow_geometry(gy.shape(), wf.shape(), gx.shape(), fp),
+                                 gy.data<float>(), wf.data<float>(), nullptr, gx.data<float>());
+      return;
+    }
     conv_pass_plan<ConvolutionFamily>(fpr, ConvPass::forward).execute({gy, wf, gx});
     return;
   }
@@ -158,10 +175,21 @@ void conv2d_backward_weight(const KernelArgs& a) {
     pointwise_conv_backward_weight(gy, x, gw, gb);
     return;
   }
+  if (use_narrow_conv_kernel(pr)) {
+    cpu::narrow_conv2d_backward_weight(
+        narrow_geometry(x.shape(), gw.shape(), gy.shape(), a.p<Conv2dParams>()), gy.data<float>(),
+        x.data<float>(), gw.data<float>());
+    if (gb.defined()) bias_gradient_nchw(gy, gb);
+    return;
+  }
   run_conv_backward_weights<ConvolutionFamily>(pr, x, gy, gw, gb);
 }
 
 }  // namespace
+
+void zero_fill(const Tensor& t) {
+  if (t.defined() && t.numel() > 0) std::memset(t.data_ptr(), 0, t.nbytes());
+}
 
 void bias_gradient_nchw(const Tensor& gy, const Tensor& gb) {
   const int64_t n = gy.shape()[0], c = gy.shape()[1], hw = gy.shape()[2] * gy.shape()[3];

@@ -3,6 +3,7 @@
 #include <atomic>
 
 #include "engine/compute_precision.h"
+#include "kernels/cpu/narrow_conv2d.h"
 #include "kernels/cpu/onednn_conv_family.h"
 #include "kernels/cpu/pointwise_gemm.h"
 
@@ -19,6 +20,7 @@ std::atomic<int> g_pointwise_override{-1};
 std::atomic<int> g_backward_data_as_forward_override{-1};
 std::atomic<int> g_pointwise_gemm_override{-1};
 std::atomic<int> g_pointwise_kernel_override{-1};
+std::atomic<int> g_narrow_conv_override{-1};
 
 // Images of at least this many pixels take the sgemm path of use_pointwise_gemm() (64x64).
 constexpr int64_t kPointwiseGemmMinPixels = 4096;
@@ -72,6 +74,7 @@ void set_pointwise_matmul_override(int mode) { g_pointwise_override = mode; }
 void set_backward_data_as_forward_override(int mode) { g_backward_data_as_forward_override = mode; }
 void set_pointwise_gemm_override(int mode) { g_pointwise_gemm_override = mode; }
 void set_pointwise_kernel_override(int mode) { g_pointwise_kernel_override = mode; }
+void set_narrow_conv_kernel_override(int mode) { g_narrow_conv_override = mode; }
 
 void choose_conv_precision(ConvProblem& p) {
   const int64_t g = std::max<int64_t>(p.groups, 1);
@@ -125,6 +128,20 @@ bool use_pointwise_kernel(int64_t pixels, int64_t inner, int64_t rows) {
   const bool wide = inner >= kPointwiseKernelMinInner ||
                     (inner >= kPointwiseKernelMinNarrowInner && rows >= kPointwiseKernelWideRows);
   return pixels >= kPointwiseKernelMinPixels && inner <= kPointwiseKernelMaxInner && wide;
+}
+
+bool use_narrow_conv_kernel(const ConvProblem& p) {
+  static const int from_env = switch_from_env("CVD_NARROW_CONV_KERNEL");
+  int forced = g_narrow_conv_override.load();
+  if (forced < 0) forced = from_env;
+  if (forced == 0 || !cpu::narrow_conv2d_supported()) return false;
+  if (p.bf16 || p.groups != 1 || p.weights.size() != 4 || p.strides != dnnl::memory::dims{1, 1} ||
+      p.dilates != dnnl::memory::dims{0, 0})
+    return false;
+  if (p.dst[1] > cpu::kNarrowConvMaxOutputChannels || p.weights[2] * p.weights[3] < 2) return false;
+  for (size_t i = 0; i < 2; ++i)
+    if (p.pad_l[i] < 0 || p.pad_r[i] < 0) return false;
+  return true;
 }
 
 bool use_depthwise_kernel(const ConvProblem& p, ConvPass /*pass*/) {

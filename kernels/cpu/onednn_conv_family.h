@@ -87,6 +87,15 @@ bool use_pointwise_kernel(int64_t pixels, int64_t inner, int64_t rows);
 // network's full-resolution layers are this narrow.
 bool use_backward_data_as_forward(const ConvProblem& p);
 
+// Whether a forward or backward-weights pass (for backward data: the forward problem it is
+// computed as) runs on the hand-written kernel for few output channels (cpu/narrow_conv2d.h):
+// where the CPU has AVX-512F, f32, one group, unit stride, no dilation, at most 4 output
+// channels, a filter larger than 1x1 and no negative padding. oneDNN 2.6 vectorises over output
+// channels and ran the default network's 8 -> 2 11x11 layer at 27-31 GFLOP/s (figures in the
+// README's conv table). CVD_NARROW_CONV_KERNEL=0 / 1 turns it off / on (1: on every such problem,
+// which is also the default).
+bool use_narrow_conv_kernel(const ConvProblem& p);
+
 // Tuning overrides for tests and benchmarks: a forced layout (-1: automatic), the byte budget of
 // the reordered activations of one chunk (0: automatic), and the depthwise kernel choice
 // (-1: automatic, 0: never, 1: always), the pointwise matmul choice and the backward-data-as-
@@ -98,6 +107,11 @@ void set_pointwise_matmul_override(int mode);
 void set_backward_data_as_forward_override(int mode);
 void set_pointwise_gemm_override(int mode);
 void set_pointwise_kernel_override(int mode);
+void set_narrow_conv_kernel_override(int mode);
+
+// Sets every byte of t to zero (nothing when t is undefined or empty): the gradients of an empty
+// batch.
+void zero_fill(const Tensor& t);
 
 // Sum of gy [N, C, H, W] over N, H and W into gb [C] (f64 accumulation). bf16 backward-weights
 // passes compute the bias gradient with this instead of the primitive: oneDNN 2.6's AMX kernel

@@ -40,10 +40,6 @@ ConvProblem deconv_problem(const Shape& x, const Shape& w, const Shape& y,
   return pr;
 }
 
-void zero_fill(const Tensor& t) {
-  if (t.defined() && t.numel() > 0) std::memset(t.data_ptr(), 0, t.nbytes());
-}
-
 // in {x, w, b?}, out {y}; ConvTranspose2dParams.
 void conv_transpose2d(const KernelArgs& a) {
   const Tensor &x = a.in[0], &w = a.in[1], &b = a.in[2], &y = a.out[0];

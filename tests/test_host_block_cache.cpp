@@ -74,6 +74,12 @@ bool filled_with(const void* p, size_t n, unsigned char v) {
   return true;
 }
 
+// Sets every byte of the block to v and hands it back to the cache.
+void write_and_free(unsigned char* p, size_t n, unsigned char v) {
+  std::memset(p, v, n);
+  host_block_free(p, n);
+}
+
 TEST_F(HostBlockCache, MissPastThePeakMovesThePagesOfCachedBlocks) {
   if (!host_block_huge_pages_enabled())
     GTEST_SKIP() << "huge-page blocks are off (CVD_HUGE_PAGES=0): nothing to move by mremap";
@@ -82,10 +88,8 @@ TEST_F(HostBlockCache, MissPastThePeakMovesThePagesOfCachedBlocks) {
   // it instead. Fresh pages would read zero; moved ones keep what was written.
   auto* a = static_cast<unsigned char*>(host_block_allocate(8 * MiB));
   auto* b = static_cast<unsigned char*>(host_block_allocate(8 * MiB));
-  std::memset(a, 0x11, 8 * MiB);
-  std::memset(b, 0x22, 8 * MiB);
-  host_block_free(a, 8 * MiB);
-  host_block_free(b, 8 * MiB);
+  write_and_free(a, 8 * MiB, 0x11);
+  write_and_free(b, 8 * MiB, 0x22);
   const auto before = host_block_cache_stats();
   auto* c = static_cast<unsigned char*>(host_block_allocate(16 * MiB));
   auto s = host_block_cache_stats();
@@ -99,8 +103,7 @@ TEST_F(HostBlockCache, MissPastThePeakMovesThePagesOfCachedBlocks) {
 
   // A smaller request takes the first 6 MiB of it; the other 10 MiB stay cached in place, the
   // boundary between its two source mappings now 2 MiB into them, and serve the next request.
-  std::memset(c, 0x33, 16 * MiB);
-  host_block_free(c, 16 * MiB);
+  write_and_free(c, 16 * MiB, 0x33);
   auto* d = static_cast<unsigned char*>(host_block_allocate(6 * MiB));
   EXPECT_NE(d, c);
   EXPECT_TRUE(filled_with(d, 6 * MiB, 0x33));
@@ -109,10 +112,8 @@ TEST_F(HostBlockCache, MissPastThePeakMovesThePagesOfCachedBlocks) {
   EXPECT_EQ(e, c + 6 * MiB);
 
   // Both cached again, a 16 MiB request is stitched from three mappings: e's two, then d's.
-  std::memset(d, 0x44, 6 * MiB);
-  std::memset(e, 0x55, 10 * MiB);
-  host_block_free(d, 6 * MiB);
-  host_block_free(e, 10 * MiB);
+  write_and_free(d, 6 * MiB, 0x44);
+  write_and_free(e, 10 * MiB, 0x55);
   const auto before_f = host_block_cache_stats();
   auto* f = static_cast<unsigned char*>(host_block_allocate(16 * MiB));
   s = host_block_cache_stats();

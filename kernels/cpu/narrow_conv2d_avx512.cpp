@@ -78,8 +78,10 @@ CVD_AVX512 void forward_tile(const NarrowConvGeometry& g, const PaddedInput& p, 
                              const float* wpk, const float* b, int64_t oy, int64_t x0,
                              __mmask16 last, float* y) {
   __m512 acc[O][NV];
+#pragma GCC unroll 16
   for (int o = 0; o < O; ++o) {
     const __m512 bv = _mm512_set1_ps(b ? b[o] : 0.0f);
+#pragma GCC unroll 16
     for (int v = 0; v < NV; ++v) acc[o][v] = bv;
   }
   for (int64_t c = 0; c < g.c; ++c) {
@@ -89,17 +91,22 @@ CVD_AVX512 void forward_tile(const NarrowConvGeometry& g, const PaddedInput& p, 
       const float* wr = wpk + (c * g.kh + ky) * g.kw * O;
       for (int64_t kx = 0; kx < g.kw; ++kx) {
         __m512 wv[O];
+#pragma GCC unroll 16
         for (int o = 0; o < O; ++o) wv[o] = _mm512_set1_ps(wr[kx * O + o]);
+#pragma GCC unroll 16
         for (int v = 0; v < NV; ++v) {
           const __m512 in = _mm512_loadu_ps(row + kx + v * L);
+#pragma GCC unroll 16
           for (int o = 0; o < O; ++o) acc[o][v] = _mm512_fmadd_ps(wv[o], in, acc[o][v]);
         }
       }
     }
   }
   const int64_t oplane = g.oh * g.ow;
+#pragma GCC unroll 16
   for (int o = 0; o < O; ++o) {
     float* out = y + (n * g.o + o) * oplane + oy * g.ow + x0;
+#pragma GCC unroll 16
     for (int v = 0; v + 1 < NV; ++v) _mm512_storeu_ps(out + v * L, acc[o][v]);
     _mm512_mask_storeu_ps(out + (NV - 1) * L, last, acc[o][NV - 1]);
   }
@@ -145,7 +152,9 @@ template <int O, int K>
 CVD_AVX512 void weight_chunk(const NarrowConvGeometry& g, const PaddedInput& p, const float* gy,
                              int64_t c, int64_t ky, int64_t kx0, float* gw) {
   __m512 acc[O][K];
+#pragma GCC unroll 16
   for (int o = 0; o < O; ++o)
+#pragma GCC unroll 16
     for (int k = 0; k < K; ++k) acc[o][k] = _mm512_setzero_ps();
   const int64_t oplane = g.oh * g.ow;
   for (int64_t n = 0; n < g.n; ++n) {
@@ -157,15 +166,20 @@ CVD_AVX512 void weight_chunk(const NarrowConvGeometry& g, const PaddedInput& p, 
       for (int64_t x0 = 0; x0 < g.ow; x0 += L) {
         const __mmask16 m = lanes(g.ow - x0);
         __m512 gv[O];
+#pragma GCC unroll 16
         for (int o = 0; o < O; ++o) gv[o] = _mm512_maskz_loadu_ps(m, grow + o * oplane + x0);
+#pragma GCC unroll 16
         for (int k = 0; k < K; ++k) {
           const __m512 in = _mm512_loadu_ps(row + x0 + k);
+#pragma GCC unroll 16
           for (int o = 0; o < O; ++o) acc[o][k] = _mm512_fmadd_ps(gv[o], in, acc[o][k]);
         }
       }
     }
   }
+#pragma GCC unroll 16
   for (int o = 0; o < O; ++o)
+#pragma GCC unroll 16
     for (int k = 0; k < K; ++k)
       gw[((o * g.c + c) * g.kh + ky) * g.kw + kx0 + k] = _mm512_reduce_add_ps(acc[o][k]);
 }

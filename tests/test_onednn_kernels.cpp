@@ -330,10 +330,12 @@ TEST(OnednnConv, NarrowConvKernelTakesFewOutputChannelsAtUnitStride) {
   EXPECT_TRUE(onednn::use_narrow_conv_kernel(problem(8, 4, 7, 1, 1, 1)));
   EXPECT_TRUE(onednn::use_narrow_conv_kernel(problem(8, 1, 3, 1, 1, 1)));
   EXPECT_FALSE(onednn::use_narrow_conv_kernel(problem(8, 5, 3, 1, 1, 1)));  // 5 outputs
-  EXPECT_FALSE(onednn::use_narrow_conv_kernel(problem(8, 2, 1, 1, 1, 1)));  // 1x1
-  EXPECT_FALSE(onednn::use_narrow_conv_kernel(problem(8, 2, 3, 2, 1, 1)));  // stride 2
-  EXPECT_FALSE(onednn::use_narrow_conv_kernel(problem(8, 2, 3, 1, 2, 1)));  // dilation 2
-  EXPECT_FALSE(onednn::use_narrow_conv_kernel(problem(8, 4, 3, 1, 1, 2)));  // two groups
+  EXPECT_TRUE(onednn::use_narrow_conv_kernel(problem(16, 1, 3, 1, 1, 1)));
+  EXPECT_FALSE(onednn::use_narrow_conv_kernel(problem(64, 1, 3, 1, 1, 1)));  // Mannequin's head
+  EXPECT_FALSE(onednn::use_narrow_conv_kernel(problem(8, 2, 1, 1, 1, 1)));   // 1x1
+  EXPECT_FALSE(onednn::use_narrow_conv_kernel(problem(8, 2, 3, 2, 1, 1)));   // stride 2
+  EXPECT_FALSE(onednn::use_narrow_conv_kernel(problem(8, 2, 3, 1, 2, 1)));   // dilation 2
+  EXPECT_FALSE(onednn::use_narrow_conv_kernel(problem(8, 4, 3, 1, 1, 2)));   // two groups
   onednn::ConvProblem bf16 = problem(8, 2, 11, 1, 1, 1);
   bf16.bf16 = true;
   EXPECT_FALSE(onednn::use_narrow_conv_kernel(bf16));

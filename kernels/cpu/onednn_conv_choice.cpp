@@ -138,7 +138,9 @@ bool use_narrow_conv_kernel(const ConvProblem& p) {
   if (p.bf16 || p.groups != 1 || p.weights.size() != 4 || p.strides != dnnl::memory::dims{1, 1} ||
       p.dilates != dnnl::memory::dims{0, 0})
     return false;
-  if (p.dst[1] > cpu::kNarrowConvMaxOutputChannels || p.weights[2] * p.weights[3] < 2) return false;
+  if (p.dst[1] > cpu::kNarrowConvMaxOutputChannels || p.src[1] > cpu::kNarrowConvMaxInputChannels ||
+      p.weights[2] * p.weights[3] < 2)
+    return false;
   for (size_t i = 0; i < 2; ++i)
     if (p.pad_l[i] < 0 || p.pad_r[i] < 0) return false;
   return true;

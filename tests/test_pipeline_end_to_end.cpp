@@ -266,6 +266,61 @@ std::vector<cv::Mat> read_depth_folder(const fs::path& dir, const std::vector<st
 
 // --ensemble 2 writes, before and after training, the per-pixel geometric mean of the depths the
 // runs with seeds 1 and 2 write alone, and refuses camera refinement.
+// Given poses with a glitch: every camera from frame 5 on pitched by 2 degrees about frame 5's
+// centre, as a tracker's jump would. Pairs on one side of it are untouched; every pair across it
+// contradicts its flow (the camera moves sideways, so a pitch moves points across the epipolar
+// lines; a turn about the vertical axis would move them mostly along the lines, where a
+// depth-free check sees little). The epipolar check names pairs across the glitch only, the
+// consecutive one among them, and none with the exact poses; "drop" leaves them out.
+TEST(PipelineEndToEnd, PairsAcrossAGlitchOfGivenPosesAreNamedAndLeftOutOnRequest) {
+  test::TempDir dir;
+  SceneGroundTruth gt = write_scene(dir.path(), 10);
+  constexpr int kGlitch = 5;
+  std::vector<TimedPose> poses = read_tum_trajectory(dir / "scene" / "poses.txt");
+  const Eigen::Vector3d centre = poses[kGlitch].pose.t;
+  const Eigen::Matrix3d turn =
+      Eigen::AngleAxisd(2.0 * M_PI / 180.0, Eigen::Vector3d(1, 0.2, 0).normalized())
+          .toRotationMatrix();
+  for (size_t k = kGlitch; k < poses.size(); ++k) {
+    poses[k].pose.R = turn * poses[k].pose.R;
+    poses[k].pose.t = turn * (poses[k].pose.t - centre) + centre;
+  }
+  write_tum_trajectory(dir / "poses_glitch.txt", poses);
+  auto run = [&](const fs::path& poses_file, const char* out, const char* check) {
+    RunOptions o = scene_run(dir.path(), gt, poses_file, dir / out);
+    o.depth_long_side = 96;
+    o.epochs = 0;
+    o.warmup_steps = 0;
+    o.epipolar_check = check;
+    return run_pipeline(o).run_info.at("pairs");
+  };
+  const nlohmann::json exact = run(dir / "scene" / "poses.txt", "exact", "drop");
+  EXPECT_EQ(exact.at("dropped_contradicting_cameras"), 0) << exact.dump(1);
+  const double exact_median = exact.at("epipolar_check").at("median_px");
+  const nlohmann::json glitch = run(dir / "poses_glitch.txt", "glitch", "drop");
+  const nlohmann::json& dropped = glitch.at("epipolar_check").at("contradicting");
+  ASSERT_GE(dropped.size(), 1u) << glitch.dump(1);
+  EXPECT_EQ(glitch.at("dropped_contradicting_cameras"), dropped.size());
+  EXPECT_EQ(glitch.at("kept").get<int>() + dropped.size(), exact.at("kept").get<size_t>());
+  int across = 0;
+  for (const auto& d : dropped) {
+    const int i = std::stoi(d.at("pair")[0].get<std::string>().substr(6));
+    const int j = std::stoi(d.at("pair")[1].get<std::string>().substr(6));
+    EXPECT_TRUE(std::min(i, j) < kGlitch && std::max(i, j) >= kGlitch) << d.dump();
+    EXPECT_GT(d.at("px").get<double>(), 10 * exact_median) << d.dump();
+    across += std::abs(i - j) == 1;
+  }
+  EXPECT_EQ(across, 1) << "the consecutive pair across the glitch: " << dropped.dump();
+  // The default names the same pairs and keeps them; off does not measure.
+  const nlohmann::json warn = run(dir / "poses_glitch.txt", "warn", "warn");
+  EXPECT_EQ(warn.at("kept"), exact.at("kept"));
+  EXPECT_EQ(warn.at("dropped_contradicting_cameras"), 0);
+  EXPECT_EQ(warn.at("epipolar_check").at("contradicting"), dropped);
+  const nlohmann::json off = run(dir / "poses_glitch.txt", "off", "off");
+  EXPECT_EQ(off.at("kept"), exact.at("kept"));
+  EXPECT_FALSE(off.at("epipolar_check").contains("contradicting"));
+}
+
 TEST(PipelineEndToEnd, AnEnsembleIsTheGeometricMeanOfItsSeedsRuns) {
   test::TempDir dir;
   SceneGroundTruth gt = write_scene(dir.path(), 6);

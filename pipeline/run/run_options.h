@@ -60,6 +60,10 @@ struct RunOptions {
   // pipeline/poses/flow_poses.h), for poses from another sensor that need not agree with the
   // frames exactly.
   std::string given_poses = "fixed";
+  // Frame pairs whose flow contradicts their cameras (median epipolar distance far above the
+  // clip's; pipeline/run/pair_camera_check.h): "warn" names them, "drop" also leaves them out of
+  // the sparse points and training, "off" does not measure.
+  std::string epipolar_check = "warn";
   // Training pairs: "memory" (all loaded), "stream" (read from cache/flow per batch, prefetched;
   // memory independent of the number of pairs), "auto" (stream above 1 GiB of pairs).
   std::string pair_storage = "auto";

@@ -31,6 +31,7 @@
 #include "pipeline/run/ensemble_stage.h"
 #include "pipeline/run/flow_pair_source.h"
 #include "pipeline/run/initial_depth_stage.h"
+#include "pipeline/run/pair_camera_check.h"
 #include "pipeline/run/run_outputs.h"
 #include "pipeline/run/run_stages.h"
 #include "pipeline/run/sparse_point_stage.h"
@@ -182,6 +183,7 @@ RunResult run_pipeline(const RunOptions& o) {
   const bool stream =
       stream_pairs(o.pair_storage, hierarchical_pairs(n).size(), dsize, o.pair_precision == "f16");
   FlowStage flow = run_flow_stage(o, frames, poses, dsize, cache, stream);
+  const json epipolar = drop_pairs_contradicting_cameras(o, flow, cams, frames.names);
   timings["flow"] = since(t);
   std::vector<cv::Mat> usable;
   if (!o.masks.empty()) {
@@ -331,6 +333,8 @@ RunResult run_pipeline(const RunOptions& o) {
   }
   info["pairs"] = {{"kept", res.num_pairs},
                    {"dropped", flow.dropped},
+                   {"dropped_contradicting_cameras", flow.dropped_epipolar},
+                   {"epipolar_check", epipolar},
                    {"storage", tr.streamed ? "streamed from cache/flow" : "memory"},
                    {"flow_precision", o.pair_precision}};
   info["processes"] = {{"count", pg.size()}, {"group", pg.name()}};

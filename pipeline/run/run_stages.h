@@ -65,7 +65,8 @@ struct FlowStage {
   // of 8); load() gives them back as CV_32FC2, and rounds flows read from the cache the same way,
   // so streamed and held pairs are the same numbers. False: CV_32FC2 throughout.
   bool half_precision = true;
-  int dropped = 0;
+  int dropped = 0;           // pairs with too few consistent pixels
+  int dropped_epipolar = 0;  // pairs that contradict their cameras (pair_camera_check.h)
   double seconds = 0;
   // Pair k with its flows as CV_32FC2 (read from the cache when streamed). Safe to call from
   // another thread.

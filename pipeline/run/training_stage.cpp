@@ -79,6 +79,7 @@ TrainingStage run_training_stage(const RunOptions& o, DepthNet& net,
                        {"cameras_crc32", cameras_crc32(cams)},
                        {"sparse_points", o.sparse_points},
                        {"given_poses", o.given_poses},
+                       {"epipolar_check", o.epipolar_check},
                        {"refine_poses", o.refine_poses},
                        {"refine_focal", o.refine_focal}}
                       .dump();

@@ -90,6 +90,13 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s, bool grou
                 "With --poses: use them as they are (fixed), or adjust them and their sparse "
                 "points to flow tracks of the frames, focal and units kept (adjusted)")
       ->check(CLI::IsMember({"fixed", "adjusted"}));
+  c->add_option("--epipolar-check", o.epipolar_check,
+                "Frame pairs whose flow contradicts their cameras (median epipolar distance above "
+                "3x the clip's median and 0.4% of the image), e.g. across a glitch of given "
+                "poses: name them in a warning (warn, the default), also leave them out of the "
+                "sparse points and training (drop; at most a quarter of the pairs), or do not "
+                "measure (off)")
+      ->check(CLI::IsMember({"warn", "drop", "off"}));
   c->add_option("--pairs", o.pair_storage,
                 "Training pairs: all in memory, streamed from OUT/cache/flow per batch (memory "
                 "independent of the number of pairs; prefetched), or auto (stream above 1 GiB)")

@@ -1,0 +1,161 @@
+// The epipolar distance of a flow from two cameras (pipeline/geometry/epipolar_distance.h): zero
+// for the exact flow of the generated scene, large when one camera is turned, the rotation's
+// homography where the centres coincide; and which pairs the check drops.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "pipeline/geometry/epipolar_distance.h"
+#include "scene/synthetic_scene.h"
+
+namespace cvd {
+namespace {
+
+// Exact flow a -> b of frame a of the generated scene (its depth, both poses) and the mask of the
+// static pixels that land inside frame b.
+void exact_flow(const SyntheticScene& s, size_t a, size_t b, cv::Mat& flow, cv::Mat& mask) {
+  const SyntheticFrame &fa = s.frames[a], &fb = s.frames[b];
+  const Intrinsics& K = s.intrinsics;
+  flow.create(fa.depth.size(), CV_32FC2);
+  mask = cv::Mat::zeros(fa.depth.size(), CV_8U);
+  for (int y = 0; y < flow.rows; ++y)
+    for (int x = 0; x < flow.cols; ++x) {
+      const double z = fa.depth.at<float>(y, x);
+      const Eigen::Vector3d X =
+          fa.pose.transform(Eigen::Vector3d((x - K.cx) / K.fx * z, (y - K.cy) / K.fy * z, z));
+      const Eigen::Vector3d p = fb.pose.R.transpose() * (X - fb.pose.t);
+      const double u = K.fx * p.x() / p.z() + K.cx, v = K.fy * p.y() / p.z() + K.cy;
+      flow.at<cv::Vec2f>(y, x) = cv::Vec2f(float(u - x), float(v - y));
+      const bool inside = p.z() > 0 && u >= 0 && v >= 0 && u <= flow.cols - 1 && v <= flow.rows - 1;
+      if (inside && !fa.moving_mask.at<uint8_t>(y, x)) mask.at<uint8_t>(y, x) = 255;
+    }
+}
+
+NamedCamera camera(const SyntheticScene& s, size_t k) {
+  NamedCamera c;
+  c.pose = s.frames[k].pose;
+  c.intrinsics = s.intrinsics;
+  return c;
+}
+
+Eigen::Matrix3d turn(double deg, const Eigen::Vector3d& axis) {
+  return Eigen::AngleAxisd(deg * M_PI / 180.0, axis.normalized()).toRotationMatrix();
+}
+
+SyntheticScene small_scene() {
+  SyntheticSceneOptions so;
+  so.frames = 6;
+  so.width = 192;
+  so.height = 128;
+  so.supersampling = 1;
+  return render_synthetic_scene(so);
+}
+
+TEST(EpipolarDistance, ExactFlowLiesOnTheEpipolarLinesAndATurnedCameraDoesNot) {
+  const SyntheticScene s = small_scene();
+  cv::Mat flow, mask;
+  exact_flow(s, 0, 4, flow, mask);
+  ASSERT_GT(cv::countNonZero(mask), flow.total() / 2);
+  const NamedCamera a = camera(s, 0), b = camera(s, 4);
+  const double exact = median_epipolar_distance(flow, mask, a, b);
+  EXPECT_GE(exact, 0.0);
+  EXPECT_LT(exact, 1e-3);
+  // Camera b turned by one degree (a pose glitch). The scene's camera moves sideways, so the
+  // epipolar lines run about horizontally: a turn about the horizontal axis moves points across
+  // them (at this focal, ~100-200 px, a degree is 2-3 px), one about the vertical axis mostly
+  // along them, which no depth-free test can see.
+  auto turned = [&](const Eigen::Vector3d& axis) {
+    NamedCamera c = b;
+    c.pose.R = b.pose.R * turn(1.0, axis);
+    return median_epipolar_distance(flow, mask, a, c);
+  };
+  const double across = turned(Eigen::Vector3d::UnitX()), along = turned(Eigen::Vector3d::UnitY());
+  EXPECT_GT(across, 0.5);
+  EXPECT_GT(along, 20 * exact);
+  EXPECT_LT(along, across / 3);
+  // The distance does not depend on the baseline's length, only on its direction.
+  NamedCamera far = b;
+  far.pose.t = a.pose.t + 7.0 * (b.pose.t - a.pose.t);
+  EXPECT_LT(median_epipolar_distance(flow, mask, a, far), 1e-3);
+}
+
+TEST(EpipolarDistance, OnlyTheMaskedPixelsCount) {
+  const SyntheticScene s = small_scene();
+  cv::Mat flow, mask;
+  exact_flow(s, 1, 2, flow, mask);
+  // Garbage where the mask is zero: ignored. Without the mask the garbage is most of the image.
+  cv::Mat bad = flow.clone();
+  for (int y = 0; y < bad.rows; ++y)
+    for (int x = 0; x < bad.cols; ++x)
+      if (!mask.at<uint8_t>(y, x) || x < bad.cols * 3 / 4) bad.at<cv::Vec2f>(y, x) = {30.f, -20.f};
+  cv::Mat keep = mask.clone();
+  keep.colRange(0, bad.cols * 3 / 4).setTo(0);
+  ASSERT_GT(cv::countNonZero(keep), 100);
+  EXPECT_LT(median_epipolar_distance(bad, keep, camera(s, 1), camera(s, 2)), 1e-3);
+  EXPECT_GT(median_epipolar_distance(bad, cv::Mat(), camera(s, 1), camera(s, 2)), 1.0);
+  // Nothing sampled: negative.
+  EXPECT_LT(
+      median_epipolar_distance(bad, cv::Mat::zeros(bad.size(), CV_8U), camera(s, 1), camera(s, 2)),
+      0.0);
+}
+
+TEST(EpipolarDistance, WithoutABaselineTheRotationsHomographyIsTheMeasure) {
+  NamedCamera a, b;
+  a.intrinsics = b.intrinsics = {150, 150, 96, 64, 192, 128};
+  a.pose.t = b.pose.t = Eigen::Vector3d(0.3, -0.2, 1.0);
+  a.pose.R = turn(10, {0.2, 1, 0.1});
+  b.pose.R = a.pose.R * turn(3, {1, 0.5, 0});
+  const Eigen::Matrix3d H =
+      b.intrinsics.K() * (b.pose.R.transpose() * a.pose.R) * a.intrinsics.K().inverse();
+  cv::Mat flow(128, 192, CV_32FC2);
+  for (int y = 0; y < flow.rows; ++y)
+    for (int x = 0; x < flow.cols; ++x) {
+      const Eigen::Vector3d h = H * Eigen::Vector3d(x, y, 1);
+      flow.at<cv::Vec2f>(y, x) = cv::Vec2f(float(h.x() / h.z() - x), float(h.y() / h.z() - y));
+    }
+  EXPECT_LT(median_epipolar_distance(flow, cv::Mat(), a, b), 1e-3);
+  NamedCamera off = b;
+  off.pose.R = b.pose.R * turn(1, {0, 1, 0});
+  // One degree at 150 px focal: 2.6 px at the image centre, more towards its sides.
+  const double d = median_epipolar_distance(flow, cv::Mat(), a, off);
+  EXPECT_GT(d, 2.4);
+  EXPECT_LT(d, 4.0);
+}
+
+TEST(EpipolarCheck, DropsOutliersAboveBothTheMedianFactorAndTheFloor) {
+  std::vector<double> d(20, 0.1);
+  d.push_back(2.0);
+  d.push_back(0.5);   // 5x the median, under the floor (0.004 * 192 = 0.768 px)
+  d.push_back(0.9);   // above both
+  d.push_back(-1.0);  // unknown: never dropped, not in the median
+  const EpipolarCheck c = check_epipolar_distances(d, 192);
+  EXPECT_DOUBLE_EQ(c.median_px, 0.1);
+  EXPECT_NEAR(c.threshold_px, 0.768, 1e-12);
+  ASSERT_EQ(c.drop.size(), d.size());
+  for (size_t k = 0; k < d.size(); ++k) EXPECT_EQ(c.drop[k], k == 20 || k == 22) << k;
+  EXPECT_EQ(c.capped, 0);
+  // Where the median is high, the factor decides: 3 x 0.4 = 1.2 px.
+  std::vector<double> e(10, 0.4);
+  e[3] = 1.1;
+  e[7] = 1.3;
+  const EpipolarCheck f = check_epipolar_distances(e, 192);
+  EXPECT_NEAR(f.threshold_px, 1.2, 1e-12);
+  for (size_t k = 0; k < e.size(); ++k) EXPECT_EQ(f.drop[k], k == 7) << k;
+}
+
+TEST(EpipolarCheck, DropsAtMostAQuarterOfThePairsTheWorstFirst) {
+  std::vector<double> d = {0.1, 5.0, 0.1, 3.0, 0.1, 4.0, 0.1, 2.0, 0.1, 6.0};
+  const EpipolarCheck c = check_epipolar_distances(d, 192);
+  // Median 1.05 -> threshold 3.15: 4, 5, 6 px are above it; the cap (2 of 10) keeps 4 px.
+  int dropped = 0;
+  for (bool b : c.drop) dropped += b;
+  EXPECT_EQ(dropped, 2);
+  EXPECT_TRUE(c.drop[9]);
+  EXPECT_TRUE(c.drop[1]);
+  EXPECT_FALSE(c.drop[5]);
+  EXPECT_EQ(c.capped, 1);
+  EXPECT_TRUE(check_epipolar_distances({}, 192).drop.empty());
+}
+
+}  // namespace
+}  // namespace cvd

@@ -95,6 +95,9 @@ const std::vector<ConvShape>& shapes() {
       {"7x7_8-2_112x192", 8, 8, 112, 192, 2, 7, params(1, 3, 3)},
       {"7x7_4-4_56x96", 8, 4, 56, 96, 4, 7, params(1, 3, 3)},
       {"11x11_8-4_56x96", 8, 8, 56, 96, 4, 11, params(1, 5, 5)},
+      // Its 4 -> 8 and 8 -> 8 branches at a quarter and an eighth of `cvd run`'s 256 px.
+      {"7x7_4-8_48x64", 8, 4, 48, 64, 8, 7, params(1, 3, 3)},
+      {"11x11_8-8_24x32", 8, 8, 24, 32, 8, 11, params(1, 5, 5)},
   };
   return s;
 }

@@ -212,6 +212,13 @@ const std::vector<ConvCase>& conv_cases() {
       {"narrow 2->1 13x13 p6", 1, 2, 9, 20, 1, 13, 13, conv_params(1, 6, 6, 6, 6), true},
       {"narrow 2->3 7x7 image smaller than kernel", 2, 2, 3, 4, 3, 7, 7, conv_params(1, 3, 3, 3, 3),
        true},
+      // 5-8 outputs: forward tiles of 3 (5 outputs) and 2 vectors (6-8), backward weights in
+      // chunks of 4 (5, 6) and 3 columns (7, 8); 2 -> 8 is 8 -> 2's backward data.
+      {"narrow 4->8 7x7 rows of 40", 2, 4, 6, 40, 8, 7, 7, conv_params(1, 3, 3, 3, 3), true},
+      {"narrow 2->8 11x11 rows of 70", 1, 2, 5, 70, 8, 11, 11, conv_params(1, 5, 5, 5, 5), false},
+      {"narrow 3->5 5x5 rows of 50", 2, 3, 5, 50, 5, 5, 5, conv_params(1, 2, 2, 2, 2), true},
+      {"narrow 8->6 3x3 rows of 17", 1, 8, 4, 17, 6, 3, 3, conv_params(1, 1, 1, 1, 1), true},
+      {"narrow 1->7 11x11 p5", 2, 1, 9, 12, 7, 11, 11, conv_params(1, 5, 5, 5, 5), true},
   };
   return cases;
 }
@@ -329,7 +336,9 @@ TEST(OnednnConv, NarrowConvKernelTakesFewOutputChannelsAtUnitStride) {
   EXPECT_TRUE(onednn::use_narrow_conv_kernel(problem(8, 2, 11, 1, 1, 1)));
   EXPECT_TRUE(onednn::use_narrow_conv_kernel(problem(8, 4, 7, 1, 1, 1)));
   EXPECT_TRUE(onednn::use_narrow_conv_kernel(problem(8, 1, 3, 1, 1, 1)));
-  EXPECT_FALSE(onednn::use_narrow_conv_kernel(problem(8, 5, 3, 1, 1, 1)));  // 5 outputs
+  EXPECT_TRUE(onednn::use_narrow_conv_kernel(problem(8, 5, 3, 1, 1, 1)));
+  EXPECT_TRUE(onednn::use_narrow_conv_kernel(problem(2, 8, 11, 1, 1, 1)));
+  EXPECT_FALSE(onednn::use_narrow_conv_kernel(problem(8, 9, 3, 1, 1, 1)));  // 9 outputs
   EXPECT_TRUE(onednn::use_narrow_conv_kernel(problem(16, 1, 3, 1, 1, 1)));
   EXPECT_FALSE(onednn::use_narrow_conv_kernel(problem(64, 1, 3, 1, 1, 1)));  // Mannequin's head
   EXPECT_FALSE(onednn::use_narrow_conv_kernel(problem(8, 2, 1, 1, 1, 1)));   // 1x1
@@ -788,8 +797,9 @@ TEST(OnednnMatmul, TransposesAndBatchBroadcastMatchReference) {
 TEST(OnednnCache, SecondIdenticalCallReusesThePrimitive) {
   Generator gen(61);
   const Conv2dParams p = conv_params(1, 1, 1, 1, 1);
-  Tensor x = Tensor::randn({2, 16, 9, 9}, gen), w = Tensor::randn({8, 16, 3, 3}, gen);
-  Tensor y = Tensor::empty({2, 8, 9, 9});
+  // 16 outputs: oneDNN's primitive (up to 8 take cpu/narrow_conv2d.h, which has no cache).
+  Tensor x = Tensor::randn({2, 16, 9, 9}, gen), w = Tensor::randn({16, 16, 3, 3}, gen);
+  Tensor y = Tensor::empty({2, 16, 9, 9});
   const KernelInfo& conv = kernel(OpId::conv2d, DType::f32);
   KernelArgs a{{x, w, Tensor()}, {y}, &p};
   conv.fn(a);  // builds (or finds) the primitive
@@ -799,7 +809,7 @@ TEST(OnednnCache, SecondIdenticalCallReusesThePrimitive) {
   EXPECT_EQ(after.misses, before.misses) << "an identical call rebuilt its primitive";
   EXPECT_EQ(after.hits, before.hits + 1);
   // A new shape is a miss.
-  Tensor x2 = Tensor::randn({2, 16, 10, 9}, gen), y2 = Tensor::empty({2, 8, 10, 9});
+  Tensor x2 = Tensor::randn({2, 16, 10, 9}, gen), y2 = Tensor::empty({2, 16, 10, 9});
   KernelArgs a2{{x2, w, Tensor()}, {y2}, &p};
   conv.fn(a2);
   EXPECT_EQ(onednn::cache_stats().misses, after.misses + 1);

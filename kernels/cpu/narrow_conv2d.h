@@ -1,4 +1,4 @@
-// Hand-written dense 2-D convolution for few output channels (1-4) on NCHW tensors: forward and
+// Hand-written dense 2-D convolution for few output channels (1-8) on NCHW tensors: forward and
 // backward weights, stride 1, no dilation, one group, AVX-512.
 //
 // Why it exists: the default network (Mannequin at width 1/8) has inception branches with 7x7 and
@@ -8,7 +8,8 @@
 // demo's 41 s of training. Here the vectors run along the image row instead: the input is copied
 // once into zero-padded rows, every filter tap is one unaligned row load shared by all output
 // channels, and the output pixels (forward) or the filter taps (backward weights) are accumulated
-// in registers.
+// in registers. Up to 8 outputs since 2026-12-07: the network's 4 -> 8 and 8 -> 8 branches, and
+// the 2 -> 8 forward problem that 8 -> 2's backward data is (2x oneDNN on those shapes).
 #pragma once
 #include <cstdint>
 
@@ -21,7 +22,7 @@ struct NarrowConvGeometry {
   int64_t pad_top = 0, pad_left = 0;
 };
 
-constexpr int64_t kNarrowConvMaxOutputChannels = 4;
+constexpr int kNarrowConvMaxOutputChannels = 8;
 // The padded copy of the input holds every input channel of the batch: Mannequin's full-width
 // 64 -> 1 3x3 heads (224x384, batch 8) made it 186 MB and the training step 3% slower than
 // oneDNN, so wider inputs stay with oneDNN (the default network's narrow layers read 2-16).

@@ -1,7 +1,7 @@
-// AVX-512 dense convolution for 1-4 output channels (see narrow_conv2d.h). The input is copied
+// AVX-512 dense convolution for 1-8 output channels (see narrow_conv2d.h). The input is copied
 // once per call into zero-padded rows (every tap then reads a whole row segment without bounds
 // checks); vectors run along the output row.
-//  - forward: a tile of 4 x 16 output pixels of one row, for every output channel, accumulates in
+//  - forward: a tile of 2-4 x 16 output pixels of one row, for every output channel, accumulates in
 //    registers over input channels and filter taps: one unaligned load per tap and 16 pixels,
 //    shared by the output channels (weights broadcast);
 //  - backward weights: for one input channel, one filter row and up to 12 filter columns, every
@@ -13,6 +13,8 @@
 
 #include <algorithm>
 #include <cstring>
+#include <type_traits>
+#include <utility>
 
 #include "engine/error.h"
 #include "kernels/cpu/aligned_float_buffer.h"
@@ -27,7 +29,9 @@ namespace cvd::cpu {
 namespace {
 
 constexpr int64_t L = 16;  // floats per vector
-constexpr int V = 4;       // vectors of output pixels per forward tile
+// Vectors of output pixels per forward tile: O x V accumulators stay within 16 registers, so the
+// O broadcast weights and the row loads fit beside them (4 up to 4 outputs, then 3, then 2).
+constexpr int tile_vectors(int O) { return O <= 4 ? 4 : O == 5 ? 3 : 2; }
 
 // Zero-padded copy of x: rows of wp floats, hp rows per plane; row py, column px holds
 // x[py - pad_top][px - pad_left] (zero outside). wp covers every vector a tile or tap reads.
@@ -112,26 +116,25 @@ CVD_AVX512 void forward_tile(const NarrowConvGeometry& g, const PaddedInput& p, 
   }
 }
 
+template <int O, int NV = tile_vectors(O)>
+CVD_AVX512 void forward_tile_of_width(int vectors, const NarrowConvGeometry& g,
+                                      const PaddedInput& p, int64_t n, const float* wpk,
+                                      const float* b, int64_t oy, int64_t x0, __mmask16 last,
+                                      float* y) {
+  if constexpr (NV >= 1) {
+    if (vectors == NV) return forward_tile<O, NV>(g, p, n, wpk, b, oy, x0, last, y);
+    forward_tile_of_width<O, NV - 1>(vectors, g, p, n, wpk, b, oy, x0, last, y);
+  }
+}
+
 template <int O>
 CVD_AVX512 void forward_row(const NarrowConvGeometry& g, const PaddedInput& p, int64_t n,
                             const float* wpk, const float* b, int64_t oy, float* y) {
+  constexpr int V = tile_vectors(O);
   for (int64_t x0 = 0; x0 < g.ow; x0 += V * L) {
     const int64_t vectors = std::min<int64_t>(V, (g.ow - x0 + L - 1) / L);
     const __mmask16 last = lanes(g.ow - x0 - (vectors - 1) * L);
-    switch (vectors) {
-      case 4:
-        forward_tile<O, 4>(g, p, n, wpk, b, oy, x0, last, y);
-        break;
-      case 3:
-        forward_tile<O, 3>(g, p, n, wpk, b, oy, x0, last, y);
-        break;
-      case 2:
-        forward_tile<O, 2>(g, p, n, wpk, b, oy, x0, last, y);
-        break;
-      default:
-        forward_tile<O, 1>(g, p, n, wpk, b, oy, x0, last, y);
-        break;
-    }
+    forward_tile_of_width<O>(static_cast<int>(vectors), g, p, n, wpk, b, oy, x0, last, y);
   }
 }
 
@@ -229,6 +232,15 @@ void check_geometry(const NarrowConvGeometry& g) {
          g.o, g.h, g.w, g.oh, g.ow, g.pad_top, g.pad_left);
 }
 
+// Calls f with std::integral_constant<int, o> for o in 1 .. kNarrowConvMaxOutputChannels.
+template <int O = 1, class F>
+void with_output_count(int64_t o, F&& f) {
+  if constexpr (O <= kNarrowConvMaxOutputChannels) {
+    if (o == O) return f(std::integral_constant<int, O>{});
+    with_output_count<O + 1>(o, std::forward<F>(f));
+  }
+}
+
 }  // namespace
 
 bool narrow_conv2d_supported() {
@@ -246,32 +258,14 @@ void narrow_conv2d_forward(const NarrowConvGeometry& g, const float* x, const fl
   float* wpk = wbuf.get(taps * g.o);
   for (int64_t o = 0; o < g.o; ++o)
     for (int64_t t = 0; t < taps; ++t) wpk[t * g.o + o] = w[o * taps + t];
-  switch (g.o) {
-    case 1:
-      return forward_rows<1>(g, p, wpk, b, y);
-    case 2:
-      return forward_rows<2>(g, p, wpk, b, y);
-    case 3:
-      return forward_rows<3>(g, p, wpk, b, y);
-    default:
-      return forward_rows<4>(g, p, wpk, b, y);
-  }
+  with_output_count(g.o, [&](auto o) { forward_rows<decltype(o)::value>(g, p, wpk, b, y); });
 }
 
 void narrow_conv2d_backward_weight(const NarrowConvGeometry& g, const float* gy, const float* x,
                                    float* gw) {
   check_geometry(g);
   const PaddedInput p = pad_input(g, x, padded_buffer());
-  switch (g.o) {
-    case 1:
-      return backward_weight_chunks<1>(g, p, gy, gw);
-    case 2:
-      return backward_weight_chunks<2>(g, p, gy, gw);
-    case 3:
-      return backward_weight_chunks<3>(g, p, gy, gw);
-    default:
-      return backward_weight_chunks<4>(g, p, gy, gw);
-  }
+  with_output_count(g.o, [&](auto o) { backward_weight_chunks<decltype(o)::value>(g, p, gy, gw); });
 }
 
 }  // namespace cvd::cpu

@@ -6,7 +6,8 @@
 //    f32 through the BatchNorm2d module to 1e-5);
 //  * a data-parallel training step (frames and pairs split over the ranks, gradients summed in
 //    one bucket) gives the whole batch's single-process gradient of every network and camera
-//    parameter (relative L2 difference <= 1e-5 per tensor) and the same batch-norm statistics;
+//    parameter (f64: relative L2 difference <= 1e-9 per tensor; f32: 2e-5 for the whole
+//    gradient) and the same batch-norm statistics;
 //  * module broadcast makes every rank hold rank 0's weights.
 #include <gtest/gtest.h>
 
@@ -221,10 +222,14 @@ TEST(Mpi, DataParallelStepGivesTheWholeBatchGradientF64) {
   compare_with_one_process(DType::f64, 1e-12, 1e-9, 1e-12);
 }
 
-// f32: the whole gradient to 1e-5 and the running statistics to 1e-4 (f32 rounding of other
+// f32: the whole gradient to 2e-5 and the running statistics to 1e-4 (f32 rounding of other
 // summation orders; per tensor, the biases whose exact gradient is zero are rounding noise).
+// Measured (2026-12-07, relative L2 of the whole gradient): 7.4e-6 with every convolution on
+// oneDNN, 6.8e-6 with the few-output-channel kernel up to 4 outputs, 1.16e-5 up to 8 (it sums a
+// filter tap's products over the whole batch in one vector, the ranks over their halves); the
+// f64 test above bounds the method's own error.
 TEST(Mpi, DataParallelStepGivesTheWholeBatchGradientF32) {
-  compare_with_one_process(DType::f32, 1e-5, 0, 1e-4);
+  compare_with_one_process(DType::f32, 2e-5, 0, 1e-4);
 }
 
 TEST(Mpi, BroadcastModuleCopiesRankZerosWeights) {

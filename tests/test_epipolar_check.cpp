@@ -5,31 +5,12 @@
 
 #include <cmath>
 
+#include "exact_scene_flow.h"
 #include "pipeline/geometry/epipolar_distance.h"
 #include "scene/synthetic_scene.h"
 
 namespace cvd {
 namespace {
-
-// Exact flow a -> b of frame a of the generated scene (its depth, both poses) and the mask of the
-// static pixels that land inside frame b.
-void exact_flow(const SyntheticScene& s, size_t a, size_t b, cv::Mat& flow, cv::Mat& mask) {
-  const SyntheticFrame &fa = s.frames[a], &fb = s.frames[b];
-  const Intrinsics& K = s.intrinsics;
-  flow.create(fa.depth.size(), CV_32FC2);
-  mask = cv::Mat::zeros(fa.depth.size(), CV_8U);
-  for (int y = 0; y < flow.rows; ++y)
-    for (int x = 0; x < flow.cols; ++x) {
-      const double z = fa.depth.at<float>(y, x);
-      const Eigen::Vector3d X =
-          fa.pose.transform(Eigen::Vector3d((x - K.cx) / K.fx * z, (y - K.cy) / K.fy * z, z));
-      const Eigen::Vector3d p = fb.pose.R.transpose() * (X - fb.pose.t);
-      const double u = K.fx * p.x() / p.z() + K.cx, v = K.fy * p.y() / p.z() + K.cy;
-      flow.at<cv::Vec2f>(y, x) = cv::Vec2f(float(u - x), float(v - y));
-      const bool inside = p.z() > 0 && u >= 0 && v >= 0 && u <= flow.cols - 1 && v <= flow.rows - 1;
-      if (inside && !fa.moving_mask.at<uint8_t>(y, x)) mask.at<uint8_t>(y, x) = 255;
-    }
-}
 
 NamedCamera camera(const SyntheticScene& s, size_t k) {
   NamedCamera c;
@@ -54,7 +35,7 @@ SyntheticScene small_scene() {
 TEST(EpipolarDistance, ExactFlowLiesOnTheEpipolarLinesAndATurnedCameraDoesNot) {
   const SyntheticScene s = small_scene();
   cv::Mat flow, mask;
-  exact_flow(s, 0, 4, flow, mask);
+  test::exact_scene_flow(s, 0, 4, flow, mask);
   ASSERT_GT(cv::countNonZero(mask), flow.total() / 2);
   const NamedCamera a = camera(s, 0), b = camera(s, 4);
   const double exact = median_epipolar_distance(flow, mask, a, b);
@@ -82,7 +63,7 @@ TEST(EpipolarDistance, ExactFlowLiesOnTheEpipolarLinesAndATurnedCameraDoesNot) {
 TEST(EpipolarDistance, OnlyTheMaskedPixelsCount) {
   const SyntheticScene s = small_scene();
   cv::Mat flow, mask;
-  exact_flow(s, 1, 2, flow, mask);
+  test::exact_scene_flow(s, 1, 2, flow, mask);
   // Garbage where the mask is zero: ignored. Without the mask the garbage is most of the image.
   cv::Mat bad = flow.clone();
   for (int y = 0; y < bad.rows; ++y)

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "exact_scene_flow.h"
 #include "pipeline/geometry/flow_tracks.h"
 #include "scene/synthetic_scene.h"
 
@@ -13,29 +14,6 @@ namespace cvd {
 namespace {
 
 constexpr int kSlowClipFrames = 400;
-
-// Exact flow k -> k+1 from frame k's depth and both poses; trusted where the static scene is
-// seen in both frames.
-void exact_flow(const SyntheticScene& s, size_t k, cv::Mat& flow, cv::Mat& mask) {
-  const SyntheticFrame &a = s.frames[k], &b = s.frames[k + 1];
-  const Intrinsics& K = s.intrinsics;
-  flow.create(a.depth.size(), CV_32FC2);
-  mask = cv::Mat::zeros(a.depth.size(), CV_8U);
-  for (int y = 0; y < flow.rows; ++y)
-    for (int x = 0; x < flow.cols; ++x) {
-      const double z = a.depth.at<float>(y, x);
-      const Eigen::Vector3d X =
-          a.pose.transform(Eigen::Vector3d((x - K.cx) / K.fx * z, (y - K.cy) / K.fy * z, z));
-      const Eigen::Vector3d p = b.pose.R.transpose() * (X - b.pose.t);
-      const double u = K.fx * p.x() / p.z() + K.cx, v = K.fy * p.y() / p.z() + K.cy;
-      flow.at<cv::Vec2f>(y, x) = cv::Vec2f(float(u - x), float(v - y));
-      const bool inside = p.z() > 0 && u >= 0 && v >= 0 && u <= flow.cols - 1 && v <= flow.rows - 1;
-      if (!inside || a.moving_mask.at<uint8_t>(y, x)) continue;
-      // Visible in frame k+1 too (not occluded there): its depth matches what k+1 sees.
-      const float zb = b.depth.at<float>(int(std::lround(v)), int(std::lround(u)));
-      if (std::abs(p.z() / zb - 1.0) < 0.01) mask.at<uint8_t>(y, x) = 255;
-    }
-}
 
 // A generated clip with its exact cameras and exact consecutive flows.
 struct ExactFlowClip {
@@ -53,7 +31,7 @@ ExactFlowClip exact_flow_clip(const SyntheticSceneOptions& so) {
   for (size_t k = 0; k < n; ++k) {
     c.cams[k].pose = c.scene.frames[k].pose;
     c.cams[k].intrinsics = c.scene.intrinsics;
-    if (k + 1 < n) exact_flow(c.scene, k, c.flows[k], c.masks[k]);
+    if (k + 1 < n) test::exact_scene_flow(c.scene, k, k + 1, c.flows[k], c.masks[k]);
   }
   return c;
 }

@@ -89,7 +89,7 @@ bool use_backward_data_as_forward(const ConvProblem& p);
 
 // Whether a forward or backward-weights pass (for backward data: the forward problem it is
 // computed as) runs on the hand-written kernel for few output channels (cpu/narrow_conv2d.h):
-// where the CPU has AVX-512F, f32, one group, unit stride, no dilation, at most 4 output and 16
+// where the CPU has AVX-512F, f32, one group, unit stride, no dilation, at most 8 output and 16
 // input channels, a filter larger than 1x1 and no negative padding. oneDNN 2.6 vectorises over output
 // channels and ran the default network's 8 -> 2 11x11 layer at 27-31 GFLOP/s (figures in the
 // README's conv table). CVD_NARROW_CONV_KERNEL=0 / 1 turns it off / on (1: on every such problem,

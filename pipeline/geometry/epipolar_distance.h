@@ -6,8 +6,8 @@
 // x'^T F x = 0 for the pair's fundamental matrix F, whatever the point's depth. Its Sampson
 // distance (the first-order distance, in pixels, of the correspondence from the constraint) is
 // flow noise where the cameras are right and grows with their error where they are not: a pose
-// glitch between two frames (7-Scenes documents one between frames 121 and 122) makes every
-// pair across it unsatisfiable, and the depth trained on such pairs drifts in scale.
+// glitch between two frames (7-Scenes documents one between frames 121 and 122) makes the pairs
+// across it unsatisfiable for any depth.
 #pragma once
 #include <opencv2/core.hpp>
 

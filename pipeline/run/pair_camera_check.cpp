@@ -12,9 +12,9 @@ namespace cvd {
 
 using json = nlohmann::json;
 
-json drop_pairs_contradicting_cameras(const RunOptions& o, FlowStage& flow,
-                                      const std::vector<NamedCamera>& cams,
-                                      const std::vector<std::string>& frame_names) {
+json check_pairs_against_cameras(const RunOptions& o, FlowStage& flow,
+                                 const std::vector<NamedCamera>& cams,
+                                 const std::vector<std::string>& frame_names) {
   CVD_CHECK(o.epipolar_check == "warn" || o.epipolar_check == "drop" || o.epipolar_check == "off",
             "epipolar_check must be warn, drop or off, got '{}'", o.epipolar_check);
   if (o.epipolar_check == "off" || flow.pairs.empty()) return {{"mode", o.epipolar_check}};

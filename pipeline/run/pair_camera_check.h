@@ -22,8 +22,8 @@ namespace cvd {
 // Measures every kept pair of `flow` against `cams` (at the depth resolution; indices are frame
 // indices) unless o.epipolar_check is "off", warns naming the pairs that contradict them and,
 // with "drop", removes those pairs. Returns the record for run.json (pairs.epipolar_check).
-nlohmann::json drop_pairs_contradicting_cameras(const RunOptions& o, FlowStage& flow,
-                                                const std::vector<NamedCamera>& cams,
-                                                const std::vector<std::string>& frame_names);
+nlohmann::json check_pairs_against_cameras(const RunOptions& o, FlowStage& flow,
+                                           const std::vector<NamedCamera>& cams,
+                                           const std::vector<std::string>& frame_names);
 
 }  // namespace cvd

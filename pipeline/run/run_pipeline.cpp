@@ -183,7 +183,7 @@ RunResult run_pipeline(const RunOptions& o) {
   const bool stream =
       stream_pairs(o.pair_storage, hierarchical_pairs(n).size(), dsize, o.pair_precision == "f16");
   FlowStage flow = run_flow_stage(o, frames, poses, dsize, cache, stream);
-  const json epipolar = drop_pairs_contradicting_cameras(o, flow, cams, frames.names);
+  const json epipolar = check_pairs_against_cameras(o, flow, cams, frames.names);
   timings["flow"] = since(t);
   std::vector<cv::Mat> usable;
   if (!o.masks.empty()) {

@@ -103,8 +103,10 @@ void run_colmap_poses(const RunOptions& o, const FramesStage& f, std::optional<I
     spdlog::warn(
         "poses: little parallax: the rays that see COLMAP's points are a median {:.2f} deg apart "
         "(under {:.0f}), so a camera rotation error of a few tenths of a degree reads as a depth "
-        "error of several percent and the trained depth may end worse than the network's start; "
-        "poses from another sensor (--poses) or a clip with more camera motion help",
+        "error of several percent and the trained depth may end worse than the network's start "
+        "(COLMAP may also reconstruct such a clip differently from run to run: its matcher does "
+        "not repeat its matches); poses from another sensor (--poses) or a clip with more camera "
+        "motion help",
         median_parallax, kLowPointParallaxDeg);
   // Every registered frame shares one camera; give unregistered frames its intrinsics.
   for (auto& c : st.cameras)

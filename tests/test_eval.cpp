@@ -662,11 +662,15 @@ TEST(EvalReport, RendersInHeadlessChromium) {
   EXPECT_NE(r.output.find(">median_frame</text>"), std::string::npos);
   EXPECT_NE(r.output.find("depth colour bar"), std::string::npos);
 
-  // And as a person sees it: a screenshot with the plots' lines and the turbo thumbnails.
+  // And as a person sees it: a screenshot with the plots' lines and the turbo thumbnails. The
+  // screenshot waits for the page to settle (its inline images decoded and painted): without
+  // that, a CI run on a busy machine caught it before the thumbnails were drawn (89 colours,
+  // 0.1% saturated).
   const fs::path shot = tmp / "report.png";
   auto s = test::run_command(fmt::format(
       "chromium --headless --no-sandbox --disable-gpu --disable-background-networking "
-      "--hide-scrollbars --user-data-dir={} --window-size=1200,2400 --screenshot={} file://{}",
+      "--hide-scrollbars --run-all-compositor-stages-before-draw --virtual-time-budget=10000 "
+      "--user-data-dir={} --window-size=1200,2400 --screenshot={} file://{}",
       (tmp / "profile2").string(), shot.string(), (tmp / "out" / "report.html").string()));
   ASSERT_EQ(s.exit_code, 0) << s.output;
   const cv::Mat img = cv::imread(shot.string(), cv::IMREAD_COLOR);

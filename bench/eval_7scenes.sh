@@ -17,7 +17,9 @@
 #   flow); suffixes: "+all" gives COLMAP's mapper every frame
 #   (--colmap-keyframes all) instead of keyframes; "+colmappts" (gt only) triangulates the sparse
 #   points with COLMAP on the given poses (--sparse-points colmap); "+adjusted" (gt only) adjusts
-#   the given poses and their points on flow tracks (--given-poses adjusted); "+refine", last, adds
+#   the given poses and their points on flow tracks (--given-poses adjusted), "+fixed" (gt only)
+#   uses them as they are (--given-poses fixed; plain "gt" lets cvd choose, the default auto);
+#   "+refine", last, adds
 #   --refine-poses $REFINE (default full) and reuses the cache of the run without it, so both start from the same poses
 #   and flow)
 # Needs jq; colmap on PATH for the COLMAP run (skipped with a note when absent).
@@ -60,6 +62,9 @@ for poses in $POSES; do
   fi
   if [[ $base == *+adjusted ]]; then
     extra+=(--given-poses adjusted)
+  fi
+  if [[ $base == *+fixed ]]; then
+    extra+=(--given-poses fixed)
   fi
   if [[ $base != "$poses" ]]; then
     extra+=(--refine-poses "${REFINE:-full}")

@@ -66,10 +66,11 @@ struct PipelineOptions {
   /// --sparse-points (with poses_file): "flow" (flow tracks), "colmap" (COLMAP's
   /// point_triangulator on the given poses) or "auto" (colmap when it is on PATH)
   std::string sparse_points = "flow";
-  /// --given-poses (with poses_file): "fixed", or "adjusted" (the flow bundle adjustment starts
+  /// --given-poses (with poses_file): "fixed", "adjusted" (the flow bundle adjustment starts
   /// from them: cameras and sparse points fitted to flow tracks of the frames; focal and units
-  /// kept)
-  std::string given_poses = "fixed";
+  /// kept) or "auto" (both; the adjusted cameras where they lower the median epipolar distance of
+  /// the training pairs' flow to at most 0.75x the given poses')
+  std::string given_poses = "auto";
 
   // Flow
   /// --pairs: training pairs "memory", "stream" (read from OUT/cache/flow per batch) or "auto"

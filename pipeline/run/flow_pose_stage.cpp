@@ -74,7 +74,11 @@ void run_flow_poses(const RunOptions& o, const FramesStage& f, const std::option
     };
     FlowPoseResult r = estimate_flow_poses(
         f.names, [&](size_t k) { return f.load(static_cast<int>(k)); }, mask, K, fo, start);
-    for (const auto& w : r.warnings) spdlog::warn("poses: {}", w);
+    // With --given-poses auto the adjusted cameras may not be used: their warnings become
+    // information (the choice, pipeline/run/given_pose_choice.h, warns when they are used).
+    const bool may_be_unused = start && o.given_poses == "auto";
+    for (const auto& w : r.warnings)
+      spdlog::log(may_be_unused ? spdlog::level::info : spdlog::level::warn, "poses: {}", w);
     spdlog::info(
         "poses: cameras from optical flow: {} of {} frames, {} tracks, {} points, RMS {:.2f} px, "
         "focal {:.1f} px ({}), {:.0f} s",

@@ -58,8 +58,9 @@ struct RunOptions {
   // Given poses as they are ("fixed") or as the start of the flow bundle adjustment ("adjusted":
   // cameras and points adjusted on flow tracks of the frames, focal and units kept;
   // pipeline/poses/flow_poses.h), for poses from another sensor that need not agree with the
-  // frames exactly.
-  std::string given_poses = "fixed";
+  // frames exactly; "auto" computes both and keeps the set that agrees clearly better with the
+  // training pairs' flow (pipeline/run/given_pose_choice.h).
+  std::string given_poses = "auto";
   // Frame pairs whose flow contradicts their cameras (median epipolar distance far above the
   // clip's; pipeline/run/pair_camera_check.h): "warn" names them, "drop" also leaves them out of
   // the sparse points and training, "off" does not measure.

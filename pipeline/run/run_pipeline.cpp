@@ -30,6 +30,7 @@
 #include "pipeline/run/depth_inference.h"
 #include "pipeline/run/ensemble_stage.h"
 #include "pipeline/run/flow_pair_source.h"
+#include "pipeline/run/given_pose_choice.h"
 #include "pipeline/run/initial_depth_stage.h"
 #include "pipeline/run/pair_camera_check.h"
 #include "pipeline/run/run_outputs.h"
@@ -102,8 +103,8 @@ RunResult run_pipeline(const RunOptions& o) {
   // checks), an unknown precision or bf16 without CPU support are errors.
   CVD_CHECK(o.refine_poses == "none" || o.refine_poses == "rotation" || o.refine_poses == "full",
             "refine_poses must be none, rotation or full, got '{}'", o.refine_poses);
-  CVD_CHECK(o.given_poses == "fixed" || o.given_poses == "adjusted",
-            "given_poses must be fixed or adjusted, got '{}'", o.given_poses);
+  CVD_CHECK(o.given_poses == "fixed" || o.given_poses == "adjusted" || o.given_poses == "auto",
+            "given_poses must be fixed, adjusted or auto, got '{}'", o.given_poses);
   CVD_CHECK(o.warmup_scale == "auto" || o.warmup_scale == "frame" || o.warmup_scale == "video",
             "warmup_scale must be auto, frame or video, got '{}'", o.warmup_scale);
   CVD_CHECK(o.poses_source == "auto" || o.poses_source == "colmap" || o.poses_source == "flow",
@@ -183,6 +184,17 @@ RunResult run_pipeline(const RunOptions& o) {
   const bool stream =
       stream_pairs(o.pair_storage, hierarchical_pairs(n).size(), dsize, o.pair_precision == "f16");
   FlowStage flow = run_flow_stage(o, frames, poses, dsize, cache, stream);
+  // --given-poses auto: the given cameras or the adjusted ones, by their agreement with the flow.
+  const json given_choice = choose_given_poses(flow, dsize, poses);
+  if (!given_choice.is_null()) {
+    if (given_choice.at("chosen") == "adjusted" && o.sparse_points != "flow")
+      spdlog::warn(
+          "poses: --sparse-points {} is not used with the adjusted poses (their points come from "
+          "the adjustment on flow tracks)",
+          o.sparse_points);
+    cams = poses.cameras;
+    for (auto& c : cams) c.intrinsics = c.intrinsics.scaled_to(dsize.width, dsize.height);
+  }
   const json epipolar = check_pairs_against_cameras(o, flow, cams, frames.names);
   timings["flow"] = since(t);
   std::vector<cv::Mat> usable;
@@ -319,6 +331,7 @@ RunResult run_pipeline(const RunOptions& o) {
                     {cams[0].intrinsics.fx, cams[0].intrinsics.fy, cams[0].intrinsics.cx,
                      cams[0].intrinsics.cy}},
                    {"details", poses.info}};
+  if (!given_choice.is_null()) info["poses"]["given_poses"] = given_choice;
   info["calibration"] = initial.calibration;
   if (!ensemble.is_null()) info["ensemble"] = ensemble;
   if (!tr.refinement.is_null()) info["camera_refinement"] = tr.refinement;

@@ -315,6 +315,23 @@ PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::
             o.sparse_points);
       const std::vector<NamedCamera> given = st.cameras;
       run_flow_poses(o, f, K, cache, st, intrinsics_info, &given);
+    } else if (o.given_poses == "auto") {
+      // Both sets; the flow pairs decide between them (pipeline/run/given_pose_choice.h). The
+      // adjustment failing leaves the given poses.
+      const std::vector<NamedCamera> given = st.cameras;
+      auto adjusted = std::make_shared<PosesStage>(st);
+      json adjusted_intrinsics;  // the given intrinsics are kept: recorded below
+      try {
+        run_flow_poses(o, f, K, cache, *adjusted, adjusted_intrinsics, &given);
+        st.adjusted = adjusted;
+      } catch (const Error& e) {
+        if (e.category() == ErrorCategory::cancelled) throw;
+        spdlog::info(
+            "poses: the given poses could not be adjusted on flow tracks ({}); they are "
+            "used as they are",
+            e.what());
+      }
+      add_known_pose_points(o, f, *K, cache, st);
     } else {
       add_known_pose_points(o, f, *K, cache, st);
     }
@@ -377,6 +394,7 @@ PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::
       break;
     }
   st.info["intrinsics"] = intrinsics_info;
+  if (st.adjusted) st.adjusted->info["intrinsics"] = intrinsics_info;  // the same focal, kept
   int registered = 0;
   for (auto& c : st.cameras) registered += c.registered;
   CVD_CHECK(registered >= 2, "only {} frame(s) have poses; at least 2 are needed", registered);

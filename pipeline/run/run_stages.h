@@ -40,6 +40,9 @@ struct PosesStage {
   std::string intrinsics_source;  // "user", "fov", "colmap estimate"
   double seconds = 0;
   nlohmann::json info;
+  // --given-poses auto: the given cameras adjusted on flow tracks, beside the given ones in
+  // `cameras`; pipeline/run/given_pose_choice.h picks one set once the flow pairs exist.
+  std::shared_ptr<PosesStage> adjusted;
 };
 PosesStage run_poses_stage(const RunOptions& o, const FramesStage& frames,
                            const std::filesystem::path& cache);

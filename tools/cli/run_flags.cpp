@@ -87,9 +87,11 @@ void add_pipeline_flags(CLI::App* c, RunOptions& o, RunFlagStrings& s, bool grou
                 "PATH (auto)")
       ->check(CLI::IsMember({"auto", "colmap", "flow"}));
   c->add_option("--given-poses", o.given_poses,
-                "With --poses: use them as they are (fixed), or adjust them and their sparse "
-                "points to flow tracks of the frames, focal and units kept (adjusted)")
-      ->check(CLI::IsMember({"fixed", "adjusted"}));
+                "With --poses: use them as they are (fixed), adjust them and their sparse "
+                "points to flow tracks of the frames, focal and units kept (adjusted), or both "
+                "and keep the adjusted cameras only where they agree clearly better with the "
+                "flow: median epipolar distance at most 0.75x the given poses' (auto)")
+      ->check(CLI::IsMember({"fixed", "adjusted", "auto"}));
   c->add_option("--epipolar-check", o.epipolar_check,
                 "Frame pairs whose flow contradicts their cameras (median epipolar distance above "
                 "3x the clip's median and 0.4% of the image), e.g. across a glitch of given "

@@ -234,6 +234,26 @@ TEST_F(TinyClip, ARerunWithOtherTrainingSettingsStartsOverAndMoreEpochsContinue)
   EXPECT_EQ(read_json(out / "run.json")["training"]["resumed_from_epoch"], 1);
 }
 
+// Cameras estimated by the run itself (the flow's; COLMAP's go through the same text model) are
+// cached as a COLMAP text model, whose rotations are quaternions. The first run uses what it
+// wrote, read back, so a rerun sees the same cameras bit for bit and continues from the
+// checkpoint (its key holds a checksum of the cameras) instead of starting over.
+TEST_F(TinyClip, EstimatedCamerasContinueFromTheCheckpoint) {
+  const fs::path out = work() / "flow_cameras";
+  const std::string intr = intrinsics_flag_value(scene() / "intrinsics.json");
+  auto args = [&](int epochs) {
+    return "run " + q(scene() / "rgb") + " -o " + q(out) + " --epochs " + std::to_string(epochs) +
+           " --warmup 1 --width 0.0625 --depth-size 64 --no-videos --no-ply --poses-source flow" +
+           " --intrinsics " + intr;
+  };
+  CommandResult r = run_cvd(args(1));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = run_cvd(args(2));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_EQ(r.output.find("made with other settings"), std::string::npos) << r.output;
+  EXPECT_EQ(read_json(out / "run.json")["training"]["resumed_from_epoch"], 1);
+}
+
 TEST_F(TinyClip, RefinedCamerasContinueFromTheCheckpointToTheSameResult) {
   // The refined cameras are part of the epoch checkpoint: one epoch, then a rerun with two,
   // ends where an uninterrupted two-epoch run does (poses, focal and depth).

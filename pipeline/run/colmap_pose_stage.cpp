@@ -83,6 +83,9 @@ void run_colmap_poses(const RunOptions& o, const FramesStage& f, std::optional<I
       intrinsics_info["refined_focal_px"] = r.refined_focal;
     }
     write_colmap_text_model(model_dir, model);
+    // What a rerun reads (the text model's rotations are quaternions): the same cameras, bit for
+    // bit, so a rerun's training resumes from this run's checkpoints (their key has the cameras).
+    model = read_colmap_text_model(model_dir);
     write_text_file(dir / "intrinsics_info.json", intrinsics_info.dump(1));
     write_text_file(dir / "cache_key.json", key.dump(1));
   }

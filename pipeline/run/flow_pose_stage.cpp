@@ -125,6 +125,8 @@ void run_flow_poses(const RunOptions& o, const FramesStage& f, const std::option
     }
     fs::create_directories(dir);
     write_colmap_text_model(model_dir, model);
+    // What a rerun reads, bit for bit (pipeline/run/colmap_pose_stage.cpp says why).
+    model = read_colmap_text_model(model_dir);
     write_text_file(dir / "info.json", info.dump(1));
     write_text_file(dir / "cache_key.json", key.dump(1));
   }

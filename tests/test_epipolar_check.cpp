@@ -5,8 +5,11 @@
 
 #include <cmath>
 
+#include "engine/error.h"
 #include "exact_scene_flow.h"
 #include "pipeline/geometry/epipolar_distance.h"
+#include "pipeline/run/pair_camera_check.h"
+#include "pipeline/run/run_options.h"
 #include "scene/synthetic_scene.h"
 
 namespace cvd {
@@ -136,6 +139,62 @@ TEST(EpipolarCheck, DropsAtMostAQuarterOfThePairsTheWorstFirst) {
   EXPECT_FALSE(c.drop[5]);
   EXPECT_EQ(c.capped, 1);
   EXPECT_TRUE(check_epipolar_distances({}, 192).drop.empty());
+}
+
+// One pass measures a clip's pairs against several camera sets (--given-poses auto compares the
+// given and the adjusted cameras, then the pairs' check reuses the chosen set's distances): the
+// same numbers as measuring each set alone, and the same check as measuring again.
+TEST(PairCameraCheck, OnePassOverSeveralCameraSetsMeasuresEachAsAlone) {
+  const SyntheticScene s = small_scene();
+  FlowStage flow;
+  flow.half_precision = false;
+  for (const FramePair p :
+       {FramePair{0, 1}, FramePair{0, 2}, FramePair{1, 4}, FramePair{3, 4}, FramePair{2, 5}}) {
+    FlowPairData d;
+    d.pair = p;
+    test::exact_scene_flow(s, size_t(p.first), size_t(p.second), d.forward, d.forward_mask);
+    d.backward = d.forward.clone();
+    d.backward_mask = d.forward_mask.clone();
+    d.kept = true;
+    flow.pairs.push_back(d);
+  }
+  std::vector<NamedCamera> exact, glitch;
+  for (size_t k = 0; k < s.frames.size(); ++k) exact.push_back(camera(s, k));
+  glitch = exact;
+  glitch[4].pose.R = exact[4].pose.R * turn(1.0, Eigen::Vector3d::UnitX());  // pairs with 4 fail
+  const std::vector<PairDistances> m = measure_pairs_against_cameras(flow, {exact, glitch});
+  ASSERT_EQ(m.size(), 2u);
+  for (size_t set = 0; set < 2; ++set) {
+    const std::vector<NamedCamera>& cams = set == 0 ? exact : glitch;
+    ASSERT_EQ(m[set].px.size(), flow.pairs.size());
+    EXPECT_EQ(m[set].long_side, 192);
+    for (size_t k = 0; k < flow.pairs.size(); ++k) {
+      const FlowPairData& d = flow.pairs[k];
+      EXPECT_EQ(m[set].px[k],
+                median_epipolar_distance(d.forward, d.forward_mask, cams[size_t(d.pair.first)],
+                                         cams[size_t(d.pair.second)]))
+          << set << " " << k;
+    }
+  }
+  EXPECT_GT(m[1].px[2], 0.5);
+  EXPECT_LT(m[1].px[0], 1e-3);
+  RunOptions o;
+  o.epipolar_check = "drop";
+  const std::vector<std::string> names = {"a", "b", "c", "d", "e", "f"};
+  FlowStage measured_again = flow, handed_on = flow;
+  const nlohmann::json again = check_pairs_against_cameras(o, measured_again, glitch, names);
+  const nlohmann::json reused = check_pairs_against_cameras(o, handed_on, glitch, names, &m[1]);
+  EXPECT_EQ(again.dump(), reused.dump());
+  // Both pairs with frame 4 contradict it; the quarter's cap drops only the worse (3 -> 4).
+  EXPECT_EQ(again.at("dropped"), 1);
+  EXPECT_EQ(again.at("above_threshold_not_named"), 1);
+  ASSERT_EQ(handed_on.pairs.size(), measured_again.pairs.size());
+  for (size_t k = 0; k < handed_on.pairs.size(); ++k)
+    EXPECT_EQ(handed_on.pairs[k].pair, measured_again.pairs[k].pair);
+  PairDistances short_measure = m[1];
+  short_measure.px.pop_back();
+  FlowStage unchecked = flow;
+  EXPECT_THROW(check_pairs_against_cameras(o, unchecked, glitch, names, &short_measure), Error);
 }
 
 }  // namespace

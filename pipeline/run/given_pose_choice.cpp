@@ -5,7 +5,6 @@
 #include <utility>
 #include <vector>
 
-#include "pipeline/geometry/epipolar_distance.h"
 #include "pipeline/geometry/median.h"
 
 namespace cvd {
@@ -23,7 +22,7 @@ std::vector<NamedCamera> at_size(const std::vector<NamedCamera>& cams, cv::Size 
 }  // namespace
 
 json choose_given_poses(const FlowStage& flow, cv::Size depth_size, PosesStage& poses,
-                        const GivenPoseChoiceOptions& options) {
+                        PairDistances* chosen_distances, const GivenPoseChoiceOptions& options) {
   if (!poses.adjusted) return nullptr;
   std::shared_ptr<PosesStage> adjusted = std::move(poses.adjusted);
   poses.adjusted.reset();
@@ -31,15 +30,16 @@ json choose_given_poses(const FlowStage& flow, cv::Size depth_size, PosesStage& 
   const std::vector<NamedCamera> adj = at_size(adjusted->cameras, depth_size);
   int lost = 0;  // frames the given poses register and the adjustment does not
   for (size_t k = 0; k < given.size(); ++k) lost += given[k].registered && !adj[k].registered;
+  // Both sets in one pass over the pairs (each flow loaded once); the chosen set's distances are
+  // handed on to the pairs' check.
+  std::vector<PairDistances> measured = measure_pairs_against_cameras(flow, {given, adj});
   std::vector<double> d_given, d_adjusted;
   for (size_t k = 0; k < flow.pairs.size(); ++k) {
     const FramePair p = flow.pairs[k].pair;
     const size_t a = static_cast<size_t>(p.first), b = static_cast<size_t>(p.second);
     if (!given[a].registered || !given[b].registered || !adj[a].registered || !adj[b].registered)
       continue;
-    const FlowPairData d = flow.load(k);  // from the cache when streamed
-    const double g = median_epipolar_distance(d.forward, d.forward_mask, given[a], given[b]);
-    const double j = median_epipolar_distance(d.forward, d.forward_mask, adj[a], adj[b]);
+    const double g = measured[0].px[k], j = measured[1].px[k];
     if (g < 0 || j < 0) continue;
     d_given.push_back(g);
     d_adjusted.push_back(j);
@@ -48,6 +48,7 @@ json choose_given_poses(const FlowStage& flow, cv::Size depth_size, PosesStage& 
   const double ma = d_adjusted.empty() ? 0 : median(d_adjusted);
   const double ratio = mg > 0 ? ma / mg : 1.0;
   const bool use_adjusted = lost == 0 && !d_given.empty() && ratio <= options.max_ratio;
+  if (chosen_distances) *chosen_distances = std::move(measured[use_adjusted ? 1 : 0]);
   json r = {{"mode", "auto"},
             {"chosen", use_adjusted ? "adjusted" : "fixed"},
             {"measure",

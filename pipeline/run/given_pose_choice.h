@@ -19,6 +19,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "pipeline/run/pair_camera_check.h"
 #include "pipeline/run/run_stages.h"
 
 namespace cvd {
@@ -30,8 +31,11 @@ struct GivenPoseChoiceOptions {
 // With poses.adjusted set (run_poses_stage with --given-poses auto): measures both camera sets
 // against every kept pair of `flow` at `depth_size`, replaces `poses` by the adjusted stage when
 // it wins (and registers every frame the given poses do), clears poses.adjusted, and returns the
-// record for run.json (poses.given_poses). Without poses.adjusted: returns null, changes nothing.
+// record for run.json (poses.given_poses); `chosen_distances`, when given, receives the pairs'
+// distances from the chosen set (what check_pairs_against_cameras would measure again). Without
+// poses.adjusted: returns null, changes nothing.
 nlohmann::json choose_given_poses(const FlowStage& flow, cv::Size depth_size, PosesStage& poses,
+                                  PairDistances* chosen_distances = nullptr,
                                   const GivenPoseChoiceOptions& options = {});
 
 }  // namespace cvd

@@ -12,23 +12,38 @@ namespace cvd {
 
 using json = nlohmann::json;
 
+std::vector<PairDistances> measure_pairs_against_cameras(
+    const FlowStage& flow, const std::vector<std::vector<NamedCamera>>& camera_sets) {
+  std::vector<PairDistances> out(camera_sets.size());
+  for (auto& d : out) d.px.assign(flow.pairs.size(), -1.0);
+  for (size_t k = 0; k < flow.pairs.size(); ++k) {
+    const FramePair p = flow.pairs[k].pair;
+    const FlowPairData d = flow.load(k);  // from the cache when streamed
+    for (size_t s = 0; s < camera_sets.size(); ++s) {
+      const std::vector<NamedCamera>& cams = camera_sets[s];
+      out[s].long_side = std::max({out[s].long_side, d.forward.cols, d.forward.rows});
+      out[s].px[k] = median_epipolar_distance(d.forward, d.forward_mask, cams[size_t(p.first)],
+                                              cams[size_t(p.second)]);
+    }
+  }
+  return out;
+}
+
 json check_pairs_against_cameras(const RunOptions& o, FlowStage& flow,
                                  const std::vector<NamedCamera>& cams,
-                                 const std::vector<std::string>& frame_names) {
+                                 const std::vector<std::string>& frame_names,
+                                 const PairDistances* measured) {
   CVD_CHECK(o.epipolar_check == "warn" || o.epipolar_check == "drop" || o.epipolar_check == "off",
             "epipolar_check must be warn, drop or off, got '{}'", o.epipolar_check);
   if (o.epipolar_check == "off" || flow.pairs.empty()) return {{"mode", o.epipolar_check}};
   const bool drop = o.epipolar_check == "drop";
-  std::vector<double> distances(flow.pairs.size(), -1.0);
-  int long_side = 0;
-  for (size_t k = 0; k < flow.pairs.size(); ++k) {
-    const FramePair p = flow.pairs[k].pair;
-    const FlowPairData d = flow.load(k);  // from the cache when streamed
-    long_side = std::max({long_side, d.forward.cols, d.forward.rows});
-    distances[k] = median_epipolar_distance(d.forward, d.forward_mask, cams[size_t(p.first)],
-                                            cams[size_t(p.second)]);
-  }
-  const EpipolarCheck check = check_epipolar_distances(distances, long_side);
+  const PairDistances measure =
+      measured ? *measured : measure_pairs_against_cameras(flow, {cams}).front();
+  CVD_CHECK(measure.px.size() == flow.pairs.size(),
+            "pairs: {} epipolar distances measured for {} pairs", measure.px.size(),
+            flow.pairs.size());
+  const std::vector<double>& distances = measure.px;
+  const EpipolarCheck check = check_epipolar_distances(distances, measure.long_side);
   json named = json::array();
   std::vector<FlowPairData> kept;
   size_t worst = flow.pairs.size();

@@ -19,11 +19,25 @@
 
 namespace cvd {
 
-// Measures every kept pair of `flow` against `cams` (at the depth resolution; indices are frame
-// indices) unless o.epipolar_check is "off", warns naming the pairs that contradict them and,
-// with "drop", removes those pairs. Returns the record for run.json (pairs.epipolar_check).
+// Every kept pair of a FlowStage measured against one camera set.
+struct PairDistances {
+  std::vector<double> px;  // per pair, in flow.pairs' order; negative: nothing to measure
+  int long_side = 0;       // of the flows' images, pixels
+};
+
+// Measures every kept pair of `flow` against each of `camera_sets` (at the depth resolution;
+// indices are frame indices) in one pass over the pairs, so each pair's flow is loaded once
+// (from the cache when streamed) however many sets are compared.
+std::vector<PairDistances> measure_pairs_against_cameras(
+    const FlowStage& flow, const std::vector<std::vector<NamedCamera>>& camera_sets);
+
+// Measures every kept pair of `flow` against `cams` unless o.epipolar_check is "off" (or takes
+// `measured`, that measure already made against these cameras), warns naming the pairs that
+// contradict them and, with "drop", removes those pairs. Returns the record for run.json
+// (pairs.epipolar_check).
 nlohmann::json check_pairs_against_cameras(const RunOptions& o, FlowStage& flow,
                                            const std::vector<NamedCamera>& cams,
-                                           const std::vector<std::string>& frame_names);
+                                           const std::vector<std::string>& frame_names,
+                                           const PairDistances* measured = nullptr);
 
 }  // namespace cvd

@@ -185,7 +185,8 @@ RunResult run_pipeline(const RunOptions& o) {
       stream_pairs(o.pair_storage, hierarchical_pairs(n).size(), dsize, o.pair_precision == "f16");
   FlowStage flow = run_flow_stage(o, frames, poses, dsize, cache, stream);
   // --given-poses auto: the given cameras or the adjusted ones, by their agreement with the flow.
-  const json given_choice = choose_given_poses(flow, dsize, poses);
+  PairDistances given_distances;  // the chosen set's, measured by the choice
+  const json given_choice = choose_given_poses(flow, dsize, poses, &given_distances);
   if (!given_choice.is_null()) {
     if (given_choice.at("chosen") == "adjusted" && o.sparse_points != "flow")
       spdlog::warn(
@@ -195,7 +196,8 @@ RunResult run_pipeline(const RunOptions& o) {
     cams = poses.cameras;
     for (auto& c : cams) c.intrinsics = c.intrinsics.scaled_to(dsize.width, dsize.height);
   }
-  const json epipolar = check_pairs_against_cameras(o, flow, cams, frames.names);
+  const json epipolar = check_pairs_against_cameras(
+      o, flow, cams, frames.names, given_choice.is_null() ? nullptr : &given_distances);
   timings["flow"] = since(t);
   std::vector<cv::Mat> usable;
   if (!o.masks.empty()) {

@@ -248,10 +248,17 @@ TEST_F(TinyClip, EstimatedCamerasContinueFromTheCheckpoint) {
   };
   CommandResult r = run_cvd(args(1));
   ASSERT_EQ(r.exit_code, 0) << r.output;
+  // Without --poses the defaults of the flags that need it (--given-poses auto, --sparse-points
+  // flow) raise no warning.
+  EXPECT_EQ(r.output.find("apply to --poses only"), std::string::npos) << r.output;
   r = run_cvd(args(2));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_EQ(r.output.find("made with other settings"), std::string::npos) << r.output;
   EXPECT_EQ(read_json(out / "run.json")["training"]["resumed_from_epoch"], 1);
+  // Asked for explicitly, they warn that they are not used.
+  r = run_cvd(args(2) + " --given-poses fixed");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("apply to --poses only"), std::string::npos) << r.output;
 }
 
 TEST_F(TinyClip, RefinedCamerasContinueFromTheCheckpointToTheSameResult) {

@@ -336,7 +336,8 @@ PosesStage run_poses_stage(const RunOptions& o, const FramesStage& f, const fs::
       add_known_pose_points(o, f, *K, cache, st);
     }
   } else {
-    if (o.given_poses != "fixed" || o.sparse_points != "flow")
+    // Their defaults (auto, flow) say nothing: only a setting that asks for something warns.
+    if (o.given_poses != "auto" || o.sparse_points != "flow")
       spdlog::warn("poses: --given-poses and --sparse-points apply to --poses only; not used");
     // --poses-source: COLMAP, the flow (pipeline/run/flow_pose_stage.h), or COLMAP and the flow
     // where COLMAP cannot pose the clip.

@@ -36,6 +36,7 @@
 #include "pipeline/run/run_outputs.h"
 #include "pipeline/run/run_stages.h"
 #include "pipeline/run/sparse_point_stage.h"
+#include "pipeline/run/training_fit_check.h"
 #include "pipeline/run/training_stage.h"
 
 namespace cvd {
@@ -241,6 +242,8 @@ RunResult run_pipeline(const RunOptions& o) {
   RunResult res;
   res.initial_loss = tr.initial_loss;
   res.final_loss = tr.final_loss;
+  const json training_fit =
+      check_training_fit(tr.final_loss, o.fb_threshold_px, {frames.width, frames.height}, dsize);
 
   // 8. Outputs (a failure while writing them, e.g. a full disk, removes the partial ones);
   // rank 0 writes them.
@@ -370,7 +373,8 @@ RunResult run_pipeline(const RunOptions& o) {
                       {"resumed_from_epoch", tr.result.resumed_from_epoch},
                       {"geometric_loss_before", res.initial_loss},
                       {"geometric_loss_after", res.final_loss},
-                      {"geometric_loss_pairs", tr.loss_pairs}};
+                      {"geometric_loss_pairs", tr.loss_pairs},
+                      {"fit", training_fit}};
   info["timings_s"] = timings;
   // Peak resident memory of this process and of the largest subprocess (COLMAP, ffmpeg) so far;
   // a resumed run reports its own.

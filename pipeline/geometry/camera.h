@@ -52,6 +52,13 @@ struct NamedCamera {
   double timestamp = 0.0;
 };
 
+// The same cameras with their intrinsics scaled to images of width x height.
+inline std::vector<NamedCamera> cameras_at_size(std::vector<NamedCamera> cams, int width,
+                                                int height) {
+  for (auto& c : cams) c.intrinsics = c.intrinsics.scaled_to(width, height);
+  return cams;
+}
+
 inline double Intrinsics::fov_x_deg() const {
   return 2.0 * std::atan(0.5 * width / fx) * 180.0 / 3.14159265358979323846;
 }

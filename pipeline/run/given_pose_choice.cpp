@@ -11,23 +11,15 @@ namespace cvd {
 
 using json = nlohmann::json;
 
-namespace {
-
-std::vector<NamedCamera> at_size(const std::vector<NamedCamera>& cams, cv::Size size) {
-  std::vector<NamedCamera> out = cams;
-  for (auto& c : out) c.intrinsics = c.intrinsics.scaled_to(size.width, size.height);
-  return out;
-}
-
-}  // namespace
-
 json choose_given_poses(const FlowStage& flow, cv::Size depth_size, PosesStage& poses,
                         PairDistances* chosen_distances, const GivenPoseChoiceOptions& options) {
   if (!poses.adjusted) return nullptr;
   std::shared_ptr<PosesStage> adjusted = std::move(poses.adjusted);
   poses.adjusted.reset();
-  const std::vector<NamedCamera> given = at_size(poses.cameras, depth_size);
-  const std::vector<NamedCamera> adj = at_size(adjusted->cameras, depth_size);
+  const std::vector<NamedCamera> given =
+      cameras_at_size(poses.cameras, depth_size.width, depth_size.height);
+  const std::vector<NamedCamera> adj =
+      cameras_at_size(adjusted->cameras, depth_size.width, depth_size.height);
   int lost = 0;  // frames the given poses register and the adjustment does not
   for (size_t k = 0; k < given.size(); ++k) lost += given[k].registered && !adj[k].registered;
   // Both sets in one pass over the pairs (each flow loaded once); the chosen set's distances are

@@ -37,8 +37,9 @@ json check_pairs_against_cameras(const RunOptions& o, FlowStage& flow,
             "epipolar_check must be warn, drop or off, got '{}'", o.epipolar_check);
   if (o.epipolar_check == "off" || flow.pairs.empty()) return {{"mode", o.epipolar_check}};
   const bool drop = o.epipolar_check == "drop";
-  const PairDistances measure =
-      measured ? *measured : measure_pairs_against_cameras(flow, {cams}).front();
+  PairDistances own;  // measured here when not handed in
+  if (!measured) own = std::move(measure_pairs_against_cameras(flow, {cams}).front());
+  const PairDistances& measure = measured ? *measured : own;
   CVD_CHECK(measure.px.size() == flow.pairs.size(),
             "pairs: {} epipolar distances measured for {} pairs", measure.px.size(),
             flow.pairs.size());

@@ -177,8 +177,7 @@ RunResult run_pipeline(const RunOptions& o) {
   t = Clock::now();
   PosesStage poses = rank0_first([&] { return run_poses_stage(o, frames, cache); });
   timings["poses"] = since(t);
-  std::vector<NamedCamera> cams = poses.cameras;
-  for (auto& c : cams) c.intrinsics = c.intrinsics.scaled_to(dsize.width, dsize.height);
+  std::vector<NamedCamera> cams = cameras_at_size(poses.cameras, dsize.width, dsize.height);
 
   // 4. Flow on sampled pairs (streamed: left in the cache and read per training batch)
   t = Clock::now();
@@ -194,8 +193,7 @@ RunResult run_pipeline(const RunOptions& o) {
           "poses: --sparse-points {} is not used with the adjusted poses (their points come from "
           "the adjustment on flow tracks)",
           o.sparse_points);
-    cams = poses.cameras;
-    for (auto& c : cams) c.intrinsics = c.intrinsics.scaled_to(dsize.width, dsize.height);
+    cams = cameras_at_size(poses.cameras, dsize.width, dsize.height);
   }
   const json epipolar = check_pairs_against_cameras(
       o, flow, cams, frames.names, given_choice.is_null() ? nullptr : &given_distances);

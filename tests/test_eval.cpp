@@ -201,6 +201,12 @@ TEST(EvalRun, ScaledRunAgainstDemoGt) {
   EXPECT_NEAR(m["depth"]["median_video"]["disparity"]["abs_rel"].get<double>(), 0.0, 1e-6);
   EXPECT_NEAR(m["pose"]["ate_rmse"].get<double>(), 0.0, 1e-6);
   EXPECT_NEAR(m["pose"]["sim3"]["scale"].get<double>(), 2.0, 1e-6);
+  // The split by texture from the frames (the plane is textured everywhere; both regions exact).
+  const auto& t = m["depth_by_texture"];
+  EXPECT_NEAR(t["low_texture"]["share"].get<double>() + t["textured"]["share"].get<double>(), 1.0,
+              1e-12);
+  EXPECT_GT(t["textured"]["share"].get<double>(), 0.5);
+  EXPECT_NEAR(t["textured"]["abs_rel"].get<double>(), 0.0, 1e-6);
   ASSERT_FALSE(m["consistency"].contains("skipped")) << m["consistency"].dump();
   EXPECT_LT(m["consistency"]["flow_reprojection_px"].get<double>(), 0.5);  // DIS on exact motion
   EXPECT_LT(m["consistency"]["instability"].get<double>(), 0.005);         // run units (1 m plane)
@@ -351,6 +357,7 @@ TEST(EvalReport, RendersInHeadlessChromium) {
   EXPECT_EQ(r.output.find(">none</text>"), std::string::npos);
   EXPECT_NE(r.output.find(">median_frame</text>"), std::string::npos);
   EXPECT_NE(r.output.find("depth colour bar"), std::string::npos);
+  EXPECT_NE(r.output.find("Depth by texture"), std::string::npos);
 
   // And as a person sees it: a screenshot with the plots' lines and the turbo thumbnails. The
   // screenshot waits for the page to settle (its inline images decoded and painted): without

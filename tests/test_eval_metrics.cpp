@@ -19,6 +19,7 @@
 #include "pipeline/eval/eval_readers.h"
 #include "pipeline/eval/eval_report.h"
 #include "pipeline/eval/eval_run.h"
+#include "pipeline/eval/eval_texture_split.h"
 #include "pipeline/io/image_io.h"
 #include "pipeline/io/pfm_io.h"
 #include "pipeline/io/sparse_depth_io.h"
@@ -318,4 +319,55 @@ TEST(EvalConsistency, KltTracksFollowKnownMotionAndStabilityDetectsFlicker) {
   // depth (+-10% of 2 m) moves points by ~0.4 m between frames.
   EXPECT_LT(good.instability, 0.01);
   EXPECT_GT(bad.instability, 0.2);
+}
+
+// ---- depth by texture ---------------------------------------------------------------------------
+
+// A flat frame is low texture everywhere, strong noise almost nowhere (under 5% of its pixels,
+// where neighbours happen to be alike), at any resolution.
+TEST(EvalTextureSplit, FlatFramesAreLowTextureAtAnyResolution) {
+  for (cv::Size size : {cv::Size(640, 480), cv::Size(160, 120)}) {
+    cv::Mat flat(size, CV_8U, cv::Scalar(128)), noise(size, CV_8U);
+    cv::RNG(3).fill(noise, cv::RNG::UNIFORM, 0, 256);
+    const cv::Size depth_size(size.width / 2, size.height / 2);
+    const cv::Mat low_flat = low_texture_mask(flat, depth_size, {});
+    const cv::Mat low_noise = low_texture_mask(noise, depth_size, {});
+    EXPECT_EQ(low_flat.size(), depth_size);
+    EXPECT_EQ(cv::countNonZero(low_flat), depth_size.area());
+    EXPECT_LT(cv::countNonZero(low_noise), depth_size.area() / 20);
+  }
+  EXPECT_THROW(low_texture_mask(cv::Mat(4, 4, CV_32F), {4, 4}, {}), Error);
+}
+
+// The left 30% of each frame is flat and its depth 20% too far; the textured rest is exact. The
+// median scale comes from the textured majority (1), so the split gives AbsRel 0.2 on the flat
+// pixels and 0 on the others, with their shares.
+TEST(EvalTextureSplit, ErrorsOfEachRegionWithTheFramesScale) {
+  std::vector<cv::Mat> preds, gts, greys;
+  for (int k = 0; k < 3; ++k) {
+    cv::Mat g = random_depth(200, 100, 1.0, 3.0, 20 + k);
+    cv::Mat p = g * (0.5 + k);  // any per-frame scale: median_frame removes it
+    cv::Mat grey(100, 200, CV_8U);
+    cv::RNG(k).fill(grey, cv::RNG::UNIFORM, 0, 256);
+    const cv::Rect flat(0, 0, 60, 100);
+    grey(flat).setTo(90);
+    p(flat) *= 1.2;
+    preds.push_back(p);
+    gts.push_back(g);
+    greys.push_back(grey);
+  }
+  const DepthEvalResult r = evaluate_video_depth(preds, gts, DepthAlignment::median_frame,
+                                                 DepthSpace::depth, DepthEvalOptions{});
+  const TextureSplit s = depth_errors_by_texture(preds, gts, greys, r, DepthEvalOptions{});
+  // The flat region's border columns see the noise through the 3x3 Sobel at 256 px: a few
+  // columns of the 60 are textured.
+  EXPECT_NEAR(s.low_texture.share, 0.3, 0.03);
+  EXPECT_NEAR(s.textured.share + s.low_texture.share, 1.0, 1e-12);
+  EXPECT_EQ(s.low_texture.pixels + s.textured.pixels, 3 * 200 * 100);
+  // A few noise pixels whose neighbourhood happens to be smooth count as low texture (exact depth).
+  EXPECT_NEAR(s.low_texture.abs_rel, 0.2, 0.005);
+  EXPECT_EQ(s.low_texture.delta1, 1.0);
+  EXPECT_LT(s.textured.abs_rel, 0.2 * 0.05);  // the few border columns of the flat region
+  EXPECT_THROW(depth_errors_by_texture(preds, gts, greys, DepthEvalResult{}, DepthEvalOptions{}),
+               Error);
 }

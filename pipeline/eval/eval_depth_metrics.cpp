@@ -147,9 +147,8 @@ static cv::Mat to_space(const cv::Mat& depth, DepthSpace space) {
   return out;
 }
 
-// p' = s p + b, clamped to the valid range of the space so logs and ratios stay finite.
-static cv::Mat apply_fit(const cv::Mat& p, const DepthAlignmentFit& f, DepthSpace space,
-                         const DepthEvalOptions& opt) {
+cv::Mat apply_fit(const cv::Mat& p, const DepthAlignmentFit& f, DepthSpace space,
+                  const DepthEvalOptions& opt) {
   double lo, hi;
   if (space == DepthSpace::depth) {
     lo = opt.min_depth > 0 ? opt.min_depth : 1e-6;

@@ -66,6 +66,11 @@ DepthAlignmentFit fit_lstsq_scale_shift(const cv::Mat& pred, const cv::Mat& gt,
                                         const cv::Mat& mask);
 DepthAlignmentFit fit_median_scale(const cv::Mat& pred, const cv::Mat& gt, const cv::Mat& mask);
 
+// p' = s p + b for a prediction already in `space`, clamped to the valid range of the space (the
+// depth caps, or their inverses) so logs and ratios stay finite.
+cv::Mat apply_fit(const cv::Mat& p, const DepthAlignmentFit& f, DepthSpace space,
+                  const DepthEvalOptions& opt);
+
 // Per-video evaluation of one (alignment, space) combination.
 struct DepthEvalResult {
   DepthAlignment alignment = DepthAlignment::median_frame;

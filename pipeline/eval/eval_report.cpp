@@ -225,6 +225,25 @@ static std::string depth_section(const nlohmann::json& depth) {
   return o;
 }
 
+// The median_frame errors on low-texture pixels and the rest (eval_texture_split.h).
+static std::string texture_section(const nlohmann::json& t) {
+  std::string o =
+      "<table><tr><th>pixels (median per frame, depth)</th><th>share</th><th>AbsRel</th>"
+      "<th>&delta;&lt;1.25</th></tr>\n";
+  for (const char* region : {"low_texture", "textured"}) {
+    const nlohmann::json r = t.value(region, nlohmann::json::object());
+    o += fmt::format("<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>\n",
+                     region == std::string("textured") ? "textured" : "low texture",
+                     num(r, "share", "{:.3f}"), num(r, "abs_rel"), num(r, "delta1"));
+  }
+  o += fmt::format(
+      "</table>\n<p class=\"note\">Low texture: 3x3 Sobel gradient under {} grey levels on the "
+      "frame brought to {} px; untrained depth errs most there (flow is least reliable on flat "
+      "image regions).</p>\n",
+      num(t, "threshold", "{:.0f}"), num(t, "long_side", "{:.0f}"));
+  return o;
+}
+
 static std::string pose_section(const nlohmann::json& pose) {
   std::string o =
       "<h2>Camera trajectory</h2>\n<table><tr><th>ATE RMSE</th><th>ATE mean</th>"
@@ -324,6 +343,10 @@ std::string render_eval_report(const nlohmann::json& m,
           "<figcaption>{0}</figcaption></figure>\n",
           html_escape(t.caption), base64_encode(t.png));
     o += "</div>\n";
+  }
+  if (m.contains("depth_by_texture")) {
+    o += "<h2>Depth by texture</h2>\n";
+    o += texture_section(m["depth_by_texture"]);
   }
   for (auto& n : m.value("notes", nlohmann::json::array()))
     o += fmt::format("<p class=\"note\">{}</p>\n", html_escape(n.get<std::string>()));

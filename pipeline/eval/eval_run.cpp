@@ -11,6 +11,7 @@
 #include "engine/error.h"
 #include "pipeline/eval/eval_pose_metrics.h"
 #include "pipeline/eval/eval_sparse.h"
+#include "pipeline/eval/eval_texture_split.h"
 #include "pipeline/io/atomic_file.h"
 #include "pipeline/io/image_io.h"
 
@@ -56,6 +57,42 @@ static std::pair<double, double> depth_range(const std::vector<cv::Mat>& maps) {
   return {v[size_t(0.02 * (v.size() - 1))], v[size_t(0.98 * (v.size() - 1))]};
 }
 
+static json region_json(const RegionDepthErrors& r) {
+  return {{"pixels", r.pixels}, {"share", r.share}, {"abs_rel", r.abs_rel}, {"delta1", r.delta1}};
+}
+
+// The median_frame depth errors on low-texture pixels and on the rest (eval_texture_split.h),
+// from each frame's image (the run's, else the GT's).
+static void evaluate_texture_split(const EvalSequence& pred, const EvalSequence& gt,
+                                   const std::vector<FrameMatch>& matches,
+                                   const std::vector<cv::Mat>& ps, const std::vector<cv::Mat>& gs,
+                                   const EvalRunOptions& opt, EvalOutcome& out) {
+  std::vector<cv::Mat> greys;
+  for (const FrameMatch& m : matches) {
+    fs::path image = pred.frames[m.pred].image_path;
+    if (image.empty()) image = gt.frames[m.gt].image_path;
+    if (image.empty()) {
+      out.metrics["notes"].push_back(fmt::format(
+          "depth by texture skipped: no image for frame '{}'", pred.frames[m.pred].name));
+      return;
+    }
+    cv::Mat grey;
+    cv::cvtColor(read_color_image(image), grey, cv::COLOR_BGR2GRAY);
+    greys.push_back(grey);
+  }
+  const DepthEvalResult median_frame =
+      evaluate_video_depth(ps, gs, DepthAlignment::median_frame, DepthSpace::depth, opt.depth);
+  const TextureSplitOptions split_opt;
+  const TextureSplit split =
+      depth_errors_by_texture(ps, gs, greys, median_frame, opt.depth, split_opt);
+  out.metrics["depth_by_texture"] = {{"alignment", "median_frame"},
+                                     {"space", "depth"},
+                                     {"long_side", split_opt.long_side},
+                                     {"threshold", split_opt.threshold},
+                                     {"low_texture", region_json(split.low_texture)},
+                                     {"textured", region_json(split.textured)}};
+}
+
 static std::vector<size_t> spread_indices(size_t n, int k) {
   std::vector<size_t> out;
   if (n == 0 || k <= 0) return out;
@@ -83,6 +120,7 @@ static void evaluate_depth(const EvalSequence& pred, const EvalSequence& gt,
       depth[depth_alignment_name(a)][depth_space_name(s)] =
           errors_json(evaluate_video_depth(ps, gs, a, s, opt.depth));
   out.metrics["depth"] = depth;
+  evaluate_texture_split(pred, gt, matches, ps, gs, opt, out);
   // The run's sparse points (SfM or flow-triangulated) on the same GT, when the run kept them.
   fs::path sparse_csv = opt.pred_dir / kSparseDepthFile;
   if (!fs::exists(sparse_csv)) sparse_csv = opt.pred_dir / kSparseDepthFileUncompressed;

@@ -9,6 +9,9 @@
 //   pose {ate_rmse, ate_mean, ate_median, ate_max, frames, sim3 {scale, R[9] row-major, t[3]},
 //         ate_per_frame[], rpe [{delta, trans_rmse, trans_mean, rot_mean_deg, rot_rmse_deg,
 //         pairs}], trajectory {gt [[x,y,z]], est_aligned [[x,y,z]]}},
+//   depth_by_texture {alignment, space, long_side, threshold, low_texture {pixels, share, abs_rel,
+//          delta1}, textured {...}} (median_frame depth errors on low-texture pixels and the rest;
+//          see eval_texture_split.h),
 //   sparse {frames, points, density, abs_rel, abs_rel_video, delta1} (the run's sparse_depth.csv
 //          on the GT; see eval_sparse.h),
 //   consistency {instability, drift, instability_centroid, drift_eigen_ratio, tracks, klt_tracks,

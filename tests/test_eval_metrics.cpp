@@ -6,9 +6,6 @@
 #include <set>
 
 #include <Eigen/Geometry>
-#include <fstream>
-#include <nlohmann/json.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <random>
 
@@ -16,18 +13,10 @@
 #include "pipeline/eval/eval_consistency.h"
 #include "pipeline/eval/eval_depth_metrics.h"
 #include "pipeline/eval/eval_pose_metrics.h"
-#include "pipeline/eval/eval_readers.h"
-#include "pipeline/eval/eval_report.h"
-#include "pipeline/eval/eval_run.h"
 #include "pipeline/eval/eval_texture_split.h"
-#include "pipeline/io/image_io.h"
-#include "pipeline/io/pfm_io.h"
-#include "pipeline/io/sparse_depth_io.h"
-#include "pipeline/io/trajectory_io.h"
 #include "tests/eval_plane_scene.h"
 #include "tests/test_support.h"
 
-namespace fs = std::filesystem;
 using namespace cvd;
 using cvd::test::PlaneScene;
 

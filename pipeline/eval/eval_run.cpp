@@ -66,7 +66,8 @@ static json region_json(const RegionDepthErrors& r) {
 static void evaluate_texture_split(const EvalSequence& pred, const EvalSequence& gt,
                                    const std::vector<FrameMatch>& matches,
                                    const std::vector<cv::Mat>& ps, const std::vector<cv::Mat>& gs,
-                                   const EvalRunOptions& opt, EvalOutcome& out) {
+                                   const DepthEvalResult& median_frame, const EvalRunOptions& opt,
+                                   EvalOutcome& out) {
   std::vector<cv::Mat> greys;
   for (const FrameMatch& m : matches) {
     fs::path image = pred.frames[m.pred].image_path;
@@ -80,8 +81,6 @@ static void evaluate_texture_split(const EvalSequence& pred, const EvalSequence&
     cv::cvtColor(read_color_image(image), grey, cv::COLOR_BGR2GRAY);
     greys.push_back(grey);
   }
-  const DepthEvalResult median_frame =
-      evaluate_video_depth(ps, gs, DepthAlignment::median_frame, DepthSpace::depth, opt.depth);
   const TextureSplitOptions split_opt;
   const TextureSplit split =
       depth_errors_by_texture(ps, gs, greys, median_frame, opt.depth, split_opt);
@@ -114,13 +113,16 @@ static void evaluate_depth(const EvalSequence& pred, const EvalSequence& gt,
     gs.push_back(g);
   }
   json depth = json::object();
+  DepthEvalResult median_frame;  // in depth space: its per-frame scales also serve the split
   for (auto a : {DepthAlignment::none, DepthAlignment::median_frame, DepthAlignment::median_video,
                  DepthAlignment::lstsq_frame})
-    for (auto s : {DepthSpace::depth, DepthSpace::disparity})
-      depth[depth_alignment_name(a)][depth_space_name(s)] =
-          errors_json(evaluate_video_depth(ps, gs, a, s, opt.depth));
+    for (auto s : {DepthSpace::depth, DepthSpace::disparity}) {
+      DepthEvalResult r = evaluate_video_depth(ps, gs, a, s, opt.depth);
+      depth[depth_alignment_name(a)][depth_space_name(s)] = errors_json(r);
+      if (a == DepthAlignment::median_frame && s == DepthSpace::depth) median_frame = std::move(r);
+    }
   out.metrics["depth"] = depth;
-  evaluate_texture_split(pred, gt, matches, ps, gs, opt, out);
+  evaluate_texture_split(pred, gt, matches, ps, gs, median_frame, opt, out);
   // The run's sparse points (SfM or flow-triangulated) on the same GT, when the run kept them.
   fs::path sparse_csv = opt.pred_dir / kSparseDepthFile;
   if (!fs::exists(sparse_csv)) sparse_csv = opt.pred_dir / kSparseDepthFileUncompressed;

@@ -37,27 +37,22 @@ TextureSplit depth_errors_by_texture(const std::vector<cv::Mat>& preds,
   CVD_CHECK(median_frame.alignment == DepthAlignment::median_frame &&
                 median_frame.space == DepthSpace::depth && median_frame.fits.size() == preds.size(),
             "depth_errors_by_texture: needs the median_frame depth result of the same frames");
+  // Per-frame errors of each region (depth_errors: means over its pixels), pooled by pixel count.
   struct Sums {
     double abs_rel = 0, delta1 = 0;
     long long n = 0;
+    void add(const DepthErrors& e) {
+      abs_rel += e.abs_rel * double(e.count);
+      delta1 += e.delta1 * double(e.count);
+      n += e.count;
+    }
   } low, rest;
   for (size_t i = 0; i < preds.size(); ++i) {
     const cv::Mat valid = valid_depth_mask(preds[i], gts[i], depth_opt);
     const cv::Mat p = apply_fit(preds[i], median_frame.fits[i], DepthSpace::depth, depth_opt);
     const cv::Mat flat = low_texture_mask(greys[i], gts[i].size(), opt);
-    for (int y = 0; y < p.rows; ++y) {
-      const uchar* v = valid.ptr<uchar>(y);
-      const uchar* f = flat.ptr<uchar>(y);
-      const float* a = p.ptr<float>(y);
-      const float* g = gts[i].ptr<float>(y);
-      for (int x = 0; x < p.cols; ++x) {
-        if (!v[x]) continue;
-        Sums& s = f[x] ? low : rest;
-        s.abs_rel += std::abs(double(a[x]) - g[x]) / g[x];
-        s.delta1 += std::max(double(a[x]) / g[x], double(g[x]) / a[x]) < 1.25 ? 1.0 : 0.0;
-        ++s.n;
-      }
-    }
+    low.add(depth_errors(p, gts[i], valid & flat));
+    rest.add(depth_errors(p, gts[i], valid & ~flat));
   }
   const long long total = low.n + rest.n;
   auto region = [&](const Sums& s) {
